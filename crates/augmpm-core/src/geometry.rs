@@ -1,0 +1,319 @@
+//! 2D wall geometry: polygons, circles and the material region they bound.
+//!
+//! Distances are signed and positive on the wall side (outside the material);
+//! normals point from the material into the wall.
+
+use crate::math::{Real, Vector};
+use nalgebra::Vector2;
+
+pub type Point = Vector2<Real>;
+
+/// Signed distance to the nearest wall and the wall it belongs to.
+#[derive(Clone, Copy, Debug)]
+pub struct WallDistance<const D: usize> {
+    /// Signed distance (m): positive outside the material region.
+    pub distance: Real,
+    /// Unit normal pointing out of the material, into the wall.
+    pub normal: Vector<D>,
+    /// Index of the wall in [`Region::walls`] order.
+    pub wall: usize,
+}
+
+/// A region the material may occupy, bounded by walls.
+pub trait Region<const D: usize>: Send + Sync {
+    fn distance(&self, x: &Vector<D>) -> WallDistance<D>;
+}
+
+/// A closed polygon given counter-clockwise.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Polygon {
+    pub vertices: Vec<Point>,
+}
+
+impl Polygon {
+    pub fn new(vertices: Vec<Point>) -> Self {
+        Self { vertices }
+    }
+
+    pub fn edges(&self) -> impl Iterator<Item = (Point, Point)> + '_ {
+        let n = self.vertices.len();
+        (0..n).map(move |i| (self.vertices[i], self.vertices[(i + 1) % n]))
+    }
+
+    /// Signed area (m²): positive for counter-clockwise vertices (shoelace formula).
+    pub fn signed_area(&self) -> Real {
+        0.5 * self
+            .edges()
+            .map(|(a, b)| a.x * b.y - b.x * a.y)
+            .sum::<Real>()
+    }
+
+    /// Point-in-polygon by the even–odd crossing rule.
+    pub fn contains(&self, p: &Point) -> bool {
+        let mut inside = false;
+        for (a, b) in self.edges() {
+            if (a.y > p.y) != (b.y > p.y) {
+                let x = a.x + (p.y - a.y) / (b.y - a.y) * (b.x - a.x);
+                if p.x < x {
+                    inside = !inside;
+                }
+            }
+        }
+        inside
+    }
+
+    /// Signed distance (positive outside) and the outward unit normal of the nearest boundary point.
+    pub fn signed_distance(&self, p: &Point) -> (Real, Point) {
+        let mut best = (Real::INFINITY, Point::zeros(), Point::zeros());
+        for (a, b) in self.edges() {
+            let e = b - a;
+            let t = ((p - a).dot(&e) / e.norm_squared()).clamp(0.0, 1.0);
+            let q = a + e * t;
+            let d = (p - q).norm();
+            if d < best.0 {
+                // Outward normal of a CCW edge (a → b) is the edge turned clockwise.
+                best = (d, q, Point::new(e.y, -e.x).normalize());
+            }
+        }
+        let (d, q, edge_normal) = best;
+        let inside = self.contains(p);
+        // Away from the wall, the direction to the nearest point is the true normal
+        // (also at corners); on the wall itself fall back to the edge normal.
+        let normal = if d > 1e-12 {
+            let n = (p - q) / d;
+            if inside {
+                -n
+            } else {
+                n
+            }
+        } else {
+            edge_normal
+        };
+        (if inside { -d } else { d }, normal)
+    }
+
+    /// First pair of non-adjacent edges that intersect, if any.
+    pub fn self_intersection(&self) -> Option<(usize, usize)> {
+        let n = self.vertices.len();
+        for i in 0..n {
+            for j in i + 1..n {
+                let adjacent = j == i + 1 || (i == 0 && j == n - 1);
+                if adjacent {
+                    continue;
+                }
+                let (a, b) = (self.vertices[i], self.vertices[(i + 1) % n]);
+                let (c, d) = (self.vertices[j], self.vertices[(j + 1) % n]);
+                if segments_intersect(&a, &b, &c, &d) {
+                    return Some((i, j));
+                }
+            }
+        }
+        None
+    }
+}
+
+fn orient(a: &Point, b: &Point, c: &Point) -> Real {
+    (b - a).perp(&(c - a))
+}
+
+fn on_segment(a: &Point, b: &Point, p: &Point) -> bool {
+    p.x >= a.x.min(b.x) && p.x <= a.x.max(b.x) && p.y >= a.y.min(b.y) && p.y <= a.y.max(b.y)
+}
+
+/// Closed-segment intersection test (touching counts).
+pub fn segments_intersect(a: &Point, b: &Point, c: &Point, d: &Point) -> bool {
+    let (o1, o2) = (orient(a, b, c), orient(a, b, d));
+    let (o3, o4) = (orient(c, d, a), orient(c, d, b));
+    if ((o1 > 0.0 && o2 < 0.0) || (o1 < 0.0 && o2 > 0.0))
+        && ((o3 > 0.0 && o4 < 0.0) || (o3 < 0.0 && o4 > 0.0))
+    {
+        return true;
+    }
+    (o1 == 0.0 && on_segment(a, b, c))
+        || (o2 == 0.0 && on_segment(a, b, d))
+        || (o3 == 0.0 && on_segment(c, d, a))
+        || (o4 == 0.0 && on_segment(c, d, b))
+}
+
+/// Which side of a circular wall the material lives on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Side {
+    /// The circle is an obstacle; material outside it.
+    Outside,
+    /// The circle is a container; material inside it.
+    Inside,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Circle {
+    pub center: Point,
+    pub radius: Real,
+}
+
+impl Circle {
+    pub fn contains(&self, p: &Point) -> bool {
+        (p - self.center).norm() < self.radius
+    }
+
+    /// Signed distance to the circle, positive outside it, and the outward normal.
+    pub fn signed_distance(&self, p: &Point) -> (Real, Point) {
+        let r = p - self.center;
+        let n = r.norm();
+        let normal = if n > 1e-300 {
+            r / n
+        } else {
+            Point::new(1.0, 0.0)
+        };
+        (n - self.radius, normal)
+    }
+}
+
+/// Geometry of one wall.
+#[derive(Clone, Debug, PartialEq)]
+pub enum WallShape {
+    /// Material inside the (counter-clockwise) polygon.
+    Polygon(Polygon),
+    /// A circle, material on the given side.
+    Circle(Circle, Side),
+}
+
+/// The material region of a 2D scene: inside the domain box, inside the union
+/// of the polygon walls (if any) and on the material side of every circle.
+/// Wall `i < walls.len()` is a scene wall; index `walls.len()` is the domain box.
+#[derive(Clone, Debug)]
+pub struct Walls2 {
+    pub walls: Vec<WallShape>,
+    domain_box: Polygon,
+}
+
+impl Walls2 {
+    pub fn new(walls: Vec<WallShape>, extent: Point) -> Self {
+        let domain_box = Polygon::new(vec![
+            Point::new(0.0, 0.0),
+            Point::new(extent.x, 0.0),
+            Point::new(extent.x, extent.y),
+            Point::new(0.0, extent.y),
+        ]);
+        Self { walls, domain_box }
+    }
+
+    /// Index of the domain box among the walls.
+    pub fn box_index(&self) -> usize {
+        self.walls.len()
+    }
+}
+
+impl Region<2> for Walls2 {
+    fn distance(&self, x: &Vector<2>) -> WallDistance<2> {
+        // Intersection of constraints: the largest signed distance wins.
+        let (d, n) = self.domain_box.signed_distance(x);
+        let mut out = WallDistance {
+            distance: d,
+            normal: n,
+            wall: self.box_index(),
+        };
+        // Union of polygon containers: the smallest signed distance among them.
+        let mut union: Option<WallDistance<2>> = None;
+        for (i, w) in self.walls.iter().enumerate() {
+            match w {
+                WallShape::Polygon(p) => {
+                    let (d, n) = p.signed_distance(x);
+                    if union.is_none_or(|u| d < u.distance) {
+                        union = Some(WallDistance {
+                            distance: d,
+                            normal: n,
+                            wall: i,
+                        });
+                    }
+                }
+                WallShape::Circle(c, side) => {
+                    let (d, n) = c.signed_distance(x);
+                    let (d, n) = match side {
+                        Side::Inside => (d, n),
+                        Side::Outside => (-d, -n),
+                    };
+                    if d > out.distance {
+                        out = WallDistance {
+                            distance: d,
+                            normal: n,
+                            wall: i,
+                        };
+                    }
+                }
+            }
+        }
+        match union {
+            Some(u) if u.distance > out.distance => u,
+            _ => out,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn square() -> Polygon {
+        Polygon::new(vec![
+            Point::new(0.0, 0.0),
+            Point::new(1.0, 0.0),
+            Point::new(1.0, 1.0),
+            Point::new(0.0, 1.0),
+        ])
+    }
+
+    #[test]
+    fn polygon_area_orientation_and_distance() {
+        let s = square();
+        assert!((s.signed_area() - 1.0).abs() < 1e-15);
+        let (d, n) = s.signed_distance(&Point::new(0.5, -0.25));
+        assert!((d - 0.25).abs() < 1e-15 && (n - Point::new(0.0, -1.0)).norm() < 1e-15);
+        let (d, n) = s.signed_distance(&Point::new(0.9, 0.5));
+        assert!((d + 0.1).abs() < 1e-12 && (n - Point::new(1.0, 0.0)).norm() < 1e-12);
+        let (d, n) = s.signed_distance(&Point::new(1.0, 0.3));
+        assert!(d.abs() < 1e-15 && (n - Point::new(1.0, 0.0)).norm() < 1e-15);
+    }
+
+    #[test]
+    fn bow_tie_self_intersects_and_square_does_not() {
+        assert_eq!(square().self_intersection(), None);
+        let bow = Polygon::new(vec![
+            Point::new(0.0, 0.0),
+            Point::new(1.0, 1.0),
+            Point::new(1.0, 0.0),
+            Point::new(0.0, 1.0),
+        ]);
+        assert!(bow.self_intersection().is_some());
+    }
+
+    #[test]
+    fn region_combines_box_polygon_and_obstacle() {
+        let tri = Polygon::new(vec![
+            Point::new(0.1, 0.1),
+            Point::new(0.9, 0.1),
+            Point::new(0.5, 0.9),
+        ]);
+        let obstacle = Circle {
+            center: Point::new(0.5, 0.3),
+            radius: 0.1,
+        };
+        let walls = Walls2::new(
+            vec![
+                WallShape::Polygon(tri),
+                WallShape::Circle(obstacle, Side::Outside),
+            ],
+            Point::new(1.0, 1.0),
+        );
+        let at_centre = walls.distance(&Point::new(0.5, 0.3));
+        assert_eq!(at_centre.wall, 1);
+        assert!((at_centre.distance - 0.1).abs() < 1e-15);
+        let inside = walls.distance(&Point::new(0.5, 0.15));
+        assert!(inside.distance < 0.0);
+        let below = walls.distance(&Point::new(0.5, 0.05));
+        assert_eq!(below.wall, 0);
+        assert!((below.distance - 0.05).abs() < 1e-15);
+        assert!((below.normal - Point::new(0.0, -1.0)).norm() < 1e-12);
+        let outside_box = walls.distance(&Point::new(-0.1, 0.5));
+        assert!(outside_box.distance > 0.0);
+    }
+}

@@ -1,0 +1,154 @@
+//! Quadratic B-spline weights of MLS-MPM (Hu et al. 2018) and the moving
+//! least-squares shape functions built on them (eq. (3)–(6) of Toyota &
+//! Umetani 2024).
+
+use crate::math::{stencil_len, stencil_offset, Matrix, Real, Vector};
+
+/// The 3^D nodes around a particle and their quadratic B-spline weights.
+#[derive(Clone, Copy, Debug)]
+pub struct Stencil<const D: usize> {
+    /// Integer grid coordinate of the stencil's lowest node.
+    pub base: [i64; D],
+    /// Per-axis weights of the three nodes `base + 0, 1, 2`.
+    pub w: [[Real; 3]; D],
+    /// Particle position in cell units relative to `base`, in [0.5, 1.5).
+    pub fx: Vector<D>,
+}
+
+impl<const D: usize> Stencil<D> {
+    /// Stencil of a particle at `x` (m) on a grid of spacing `1 / inv_h` with nodes at `i·h`.
+    #[inline]
+    pub fn new(x: &Vector<D>, inv_h: Real) -> Self {
+        let mut base = [0i64; D];
+        let mut w = [[0.0; 3]; D];
+        let mut fx = Vector::<D>::zeros();
+        for k in 0..D {
+            let xk = x[k] * inv_h;
+            let b = (xk - 0.5).floor();
+            let f = xk - b;
+            base[k] = b as i64;
+            fx[k] = f;
+            w[k] = [
+                0.5 * (1.5 - f).powi(2),
+                0.75 - (f - 1.0).powi(2),
+                0.5 * (f - 0.5).powi(2),
+            ];
+        }
+        Self { base, w, fx }
+    }
+
+    /// Calls `f(offset, weight, x_i − x_p)` for every node of the stencil; the
+    /// distance is in metres (`h` is the grid spacing).
+    #[inline]
+    pub fn for_each(&self, h: Real, mut f: impl FnMut([usize; D], Real, Vector<D>)) {
+        for k in 0..stencil_len(D) {
+            let o = stencil_offset::<D>(k);
+            let mut weight = 1.0;
+            let mut dpos = Vector::<D>::zeros();
+            for a in 0..D {
+                weight *= self.w[a][o[a]];
+                dpos[a] = (o[a] as Real - self.fx[a]) * h;
+            }
+            f(o, weight, dpos);
+        }
+    }
+}
+
+/// Inverse of the MLS moment matrix `M_p` (eq. (5)) with the linear basis
+/// `P(x) = [1, x]`, stored in block form
+/// `M_p⁻¹ = [[alpha, betaᵀ], [beta, gamma]]` so that it is generic over `D`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MlsInverse<const D: usize> {
+    pub alpha: Real,
+    pub beta: Vector<D>,
+    pub gamma: Matrix<D>,
+}
+
+impl<const D: usize> MlsInverse<D> {
+    /// Closed form on a whole regular stencil: `M_p = diag(1, h²/4 I)`, so
+    /// `M_p⁻¹ = diag(1, 4/h² I)` and MLS-MPM reduces to APIC.
+    pub fn regular(h: Real) -> Self {
+        Self {
+            alpha: 1.0,
+            beta: Vector::<D>::zeros(),
+            gamma: Matrix::<D>::identity() * (4.0 / (h * h)),
+        }
+    }
+
+    /// MLS shape function of a node with weight `w` at `dpos = x_i − x_p`:
+    /// `phi = w·[M⁻¹P]₀` (value, eq. (4) first row) and `g = w·[M⁻¹P]₁..` (the
+    /// rows of eq. (6) that turn stress into nodal force and give ∇v in eq. (4)).
+    #[inline]
+    pub fn shape(&self, w: Real, dpos: &Vector<D>) -> (Real, Vector<D>) {
+        let phi = w * (self.alpha + self.beta.dot(dpos));
+        let g = (self.beta + self.gamma * dpos) * w;
+        (phi, g)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector2;
+
+    fn positions() -> Vec<Vector2<Real>> {
+        // Deterministic spread of positions, including cell faces and centres.
+        let mut xs = vec![Vector2::new(0.5, 0.5), Vector2::new(0.25, 0.75)];
+        for i in 0..50 {
+            let t = i as Real * 0.618_033_988_75;
+            xs.push(Vector2::new(
+                1.0 + (t * 3.1).fract() * 5.0,
+                2.0 + (t * 7.3).fract() * 3.0,
+            ));
+        }
+        xs
+    }
+
+    /// Partition of unity: the quadratic B-spline weights of a stencil sum to one.
+    #[test]
+    fn weights_partition_unity() {
+        let h = 0.1;
+        for x in positions() {
+            let s = Stencil::<2>::new(&(x * h), 1.0 / h);
+            let mut sum = 0.0;
+            s.for_each(h, |_, w, _| sum += w);
+            assert!((sum - 1.0).abs() < 1e-14, "sum {sum}");
+        }
+    }
+
+    /// Linear reproduction: Σ w (x_i − x_p) = 0, so a linear field is reproduced exactly.
+    #[test]
+    fn weights_reproduce_linear_fields() {
+        let h = 0.1;
+        for x in positions() {
+            let s = Stencil::<2>::new(&(x * h), 1.0 / h);
+            let mut first = Vector2::zeros();
+            s.for_each(h, |_, w, d| first += d * w);
+            assert!(first.norm() < 1e-14, "first moment {first}");
+        }
+    }
+
+    /// On a regular grid the moment matrix Σ w (x_i − x_p)(x_i − x_p)ᵀ equals h²/4·I.
+    #[test]
+    fn regular_moment_matrix_is_h2_over_4() {
+        let h = 0.0125;
+        for x in positions() {
+            let s = Stencil::<2>::new(&(x * h), 1.0 / h);
+            let mut m = nalgebra::Matrix2::<Real>::zeros();
+            s.for_each(h, |_, w, d| m += d * d.transpose() * w);
+            let expect = nalgebra::Matrix2::identity() * (h * h / 4.0);
+            assert!((m - expect).norm() < 1e-12 * h * h, "{m}");
+        }
+    }
+
+    /// The regular closed form gives phi = w and g = 4/h²·w·(x_i − x_p).
+    #[test]
+    fn regular_shape_is_apic() {
+        let h = 0.5;
+        let inv = MlsInverse::<2>::regular(h);
+        let d = Vector2::new(0.3, -0.2);
+        let (phi, g) = inv.shape(0.4, &d);
+        assert_eq!(phi, 0.4);
+        assert!((g - d * (0.4 * 4.0 / (h * h))).norm() < 1e-15);
+    }
+}

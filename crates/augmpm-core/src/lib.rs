@@ -1,0 +1,22 @@
+//! augmpm-core: an MLS-MPM engine whose walls are right.
+//!
+//! Layers, bottom up: [`math`] (dimension-generic types), [`kernel`]
+//! (B-spline weights, MLS shape functions), [`grid`], [`particles`],
+//! [`material`] (constitutive models), [`geometry`] and [`boundary`] (walls),
+//! [`transfer`] (the stages of a step), [`solver`] (model, state, step) and
+//! [`scene`] (building a simulation from a scene description).
+
+pub mod boundary;
+pub mod geometry;
+pub mod grid;
+pub mod kernel;
+pub mod material;
+pub mod math;
+pub mod particles;
+pub mod scene;
+pub mod solver;
+pub mod transfer;
+
+pub use boundary::{Method, WallCondition};
+pub use scene::{Scene, SceneError};
+pub use solver::{Metrics, Model, Simulation, StepError};

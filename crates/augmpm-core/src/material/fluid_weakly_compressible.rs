@@ -1,0 +1,139 @@
+//! Weakly compressible Newtonian fluid (Tait-like equation of state), the
+//! fluid of Toyota & Umetani 2024 after the MPM guide they cite.
+
+use super::{non_negative, positive, ConstitutiveModel, MaterialPoint};
+use crate::math::{Matrix, Real};
+use serde::{Deserialize, Serialize};
+
+/// `p = k((ρ/ρ0)^γ − 1)`, clamped below at `min_pressure`, and
+/// `σ = −p I + μ(∇v + ∇vᵀ)`. The density ρ of each particle is gathered from
+/// the particle masses scattered to the regular grid.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WeaklyCompressibleFluid {
+    /// Rest density ρ0 (kg/m³, or kg/m² in 2D).
+    pub density: Real,
+    /// EOS stiffness k (Pa).
+    pub stiffness: Real,
+    /// EOS exponent γ.
+    #[serde(default = "default_gamma")]
+    pub gamma: Real,
+    /// Dynamic viscosity μ (Pa·s).
+    #[serde(default)]
+    pub viscosity: Real,
+    /// Lowest pressure (Pa); a small negative value allows mild tension.
+    #[serde(default)]
+    pub min_pressure: Real,
+}
+
+fn default_gamma() -> Real {
+    7.0
+}
+
+impl WeaklyCompressibleFluid {
+    /// Pressure (Pa) at density `rho`.
+    pub fn pressure(&self, rho: Real) -> Real {
+        (self.stiffness * ((rho / self.density).powf(self.gamma) - 1.0)).max(self.min_pressure)
+    }
+
+    /// Cauchy stress (Pa) at density `rho` and velocity gradient `grad_v` (1/s).
+    pub fn cauchy_stress<const D: usize>(&self, rho: Real, grad_v: &Matrix<D>) -> Matrix<D> {
+        Matrix::<D>::identity() * -self.pressure(rho)
+            + (grad_v + grad_v.transpose()) * self.viscosity
+    }
+
+    pub(super) fn validate(&self) -> Result<(), (&'static str, String)> {
+        positive("density", self.density)?;
+        positive("stiffness", self.stiffness)?;
+        positive("gamma", self.gamma)?;
+        non_negative("viscosity", self.viscosity)?;
+        if !self.min_pressure.is_finite() || self.min_pressure > 0.0 {
+            return Err((
+                "min_pressure",
+                format!("must be finite and <= 0, got {}", self.min_pressure),
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl<const D: usize> ConstitutiveModel<D> for WeaklyCompressibleFluid {
+    fn volume_stress(&self, p: &MaterialPoint<D>) -> Matrix<D> {
+        let volume = p.mass / p.density;
+        self.cauchy_stress(p.density, &p.grad_v) * volume
+    }
+
+    fn update_deformation(
+        &self,
+        _f: &mut Matrix<D>,
+        _jp: &mut Real,
+        _grad_v: &Matrix<D>,
+        _dt: Real,
+    ) {
+        // The fluid's state is its grid density; F is not needed.
+    }
+
+    fn needs_grid_density(&self) -> bool {
+        true
+    }
+
+    fn density(&self) -> Real {
+        self.density
+    }
+
+    fn stable_dt(&self, h: Real) -> Real {
+        // Sound speed c² = dp/dρ at rest = kγ/ρ0; viscous diffusion needs ν dt/h² ≤ 1/(2D).
+        let sound = h / (self.stiffness * self.gamma / self.density).sqrt();
+        let nu = self.viscosity / self.density;
+        let viscous = if nu > 0.0 {
+            h * h / (2.0 * D as Real * nu)
+        } else {
+            Real::INFINITY
+        };
+        sound.min(viscous)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Matrix2;
+
+    fn water() -> WeaklyCompressibleFluid {
+        WeaklyCompressibleFluid {
+            density: 1000.0,
+            stiffness: 1e5,
+            gamma: 4.0,
+            viscosity: 2.0,
+            min_pressure: -100.0,
+        }
+    }
+
+    /// A uniaxial stretching flow ∂u/∂x = s at rest density gives σ_xx = 2μs, σ_yy = 0 (no pressure).
+    #[test]
+    fn uniaxial_stretch_gives_newtonian_stress() {
+        let s = 3.0;
+        let grad_v = Matrix2::new(s, 0.0, 0.0, 0.0);
+        let sigma = water().cauchy_stress(1000.0, &grad_v);
+        assert!((sigma - Matrix2::new(2.0 * 2.0 * s, 0.0, 0.0, 0.0)).norm() < 1e-12);
+    }
+
+    /// Compressed by 1%, p = k(1.01⁴ − 1); stretched, the pressure stops at its lower clamp.
+    #[test]
+    fn equation_of_state_and_clamp() {
+        let f = water();
+        assert!((f.pressure(1010.0) - 1e5 * (1.01f64.powi(4) - 1.0)).abs() < 1e-9);
+        assert_eq!(f.pressure(900.0), -100.0);
+        let p = MaterialPoint::<2> {
+            f: Matrix2::identity(),
+            jp: 1.0,
+            grad_v: Matrix2::zeros(),
+            mass: 2.0,
+            vol0: 0.0,
+            density: 1010.0,
+        };
+        let vs = f.volume_stress(&p);
+        let expect = -f.pressure(1010.0) * 2.0 / 1010.0;
+        assert!((vs[(0, 0)] - expect).abs() < 1e-12 && (vs[(1, 1)] - expect).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,549 @@
+//! Scene description (the resolved form of a scene file) and how a 2D
+//! simulation is built from it: validation, walls, particle seeding.
+
+use crate::boundary::{Method, NaiveBoundary, WallCondition, WallMotion};
+use crate::geometry::{Circle, Point, Polygon, Region, Side, WallShape, Walls2};
+use crate::grid::GridLayout;
+use crate::material::Material;
+use crate::math::Real;
+use crate::particles::Particles;
+use crate::solver::{Model, Simulation};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+use serde::{Deserialize, Serialize};
+
+/// A scene that cannot be built: the key (dotted path) and why.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{key}: {reason}")]
+pub struct SceneError {
+    pub key: String,
+    pub reason: String,
+}
+
+impl SceneError {
+    pub fn new(key: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self {
+            key: key.into(),
+            reason: reason.into(),
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GridSpec {
+    /// Size of the domain box [0, Lx] × [0, Ly] (m).
+    pub domain: [Real; 2],
+    /// Cells along x; h = Lx / resolution and Ly must be a whole number of cells.
+    pub resolution: usize,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimeSpec {
+    /// Time step (s); exactly one of `dt` and `cfl`.
+    #[serde(default)]
+    pub dt: Option<Real>,
+    /// Fraction of the materials' stable time step.
+    #[serde(default)]
+    pub cfl: Option<Real>,
+    pub steps: u64,
+    /// Steps between output frames.
+    pub output_interval: u64,
+}
+
+/// A wall; the domain box is always one more.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+pub enum WallSpec {
+    /// Closed polygon, counter-clockwise, material inside.
+    Polygon {
+        vertices: Vec<[Real; 2]>,
+        #[serde(default)]
+        condition: Option<WallCondition>,
+        #[serde(default)]
+        velocity: [Real; 2],
+    },
+    /// Circle, material `outside` (an obstacle, the default) or `inside` (a container).
+    Circle {
+        center: [Real; 2],
+        radius: Real,
+        #[serde(default = "default_side")]
+        side: SideSpec,
+        #[serde(default)]
+        condition: Option<WallCondition>,
+        #[serde(default)]
+        velocity: [Real; 2],
+    },
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SideSpec {
+    Outside,
+    Inside,
+}
+
+fn default_side() -> SideSpec {
+    SideSpec::Outside
+}
+
+/// Geometry of a body.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "shape", rename_all = "lowercase")]
+pub enum BodyShape {
+    /// Polygon in a local frame, placed at `center + scale · vertex`.
+    Polygon {
+        vertices: Vec<[Real; 2]>,
+        #[serde(default = "one")]
+        scale: Real,
+        #[serde(default)]
+        center: [Real; 2],
+    },
+    Box {
+        min: [Real; 2],
+        max: [Real; 2],
+    },
+    Circle {
+        center: [Real; 2],
+        radius: Real,
+    },
+}
+
+fn one() -> Real {
+    1.0
+}
+
+/// Jittered-grid seeding: one random point per square of side `spacing` (m),
+/// or `per_cell` points per grid cell on average (spacing h/√per_cell).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Seeding {
+    #[serde(default)]
+    pub spacing: Option<Real>,
+    #[serde(default)]
+    pub per_cell: Option<u32>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BodySpec {
+    #[serde(flatten)]
+    pub shape: BodyShape,
+    pub material: Material,
+    /// Initial velocity (m/s).
+    #[serde(default)]
+    pub velocity: [Real; 2],
+    #[serde(default)]
+    pub seeding: Seeding,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    #[serde(default)]
+    pub name: String,
+    /// Seed of the particle jitter; the same seed gives the same particles.
+    #[serde(default)]
+    pub seed: u64,
+    /// Gravity (m/s²).
+    pub gravity: [Real; 2],
+    pub grid: GridSpec,
+    pub time: TimeSpec,
+    /// Condition of every wall (and the domain box) unless a wall names its own.
+    #[serde(default)]
+    pub wall_condition: WallCondition,
+    #[serde(default)]
+    pub walls: Vec<WallSpec>,
+    pub bodies: Vec<BodySpec>,
+}
+
+fn point(p: &[Real; 2]) -> Point {
+    Point::new(p[0], p[1])
+}
+
+fn finite(key: &str, values: &[Real]) -> Result<(), SceneError> {
+    match values.iter().find(|v| !v.is_finite()) {
+        Some(v) => Err(SceneError::new(key, format!("must be finite, got {v}"))),
+        None => Ok(()),
+    }
+}
+
+/// Checks a wall or body polygon: ≥ 3 finite vertices, counter-clockwise, simple.
+fn checked_polygon(key: &str, vertices: Vec<Point>) -> Result<Polygon, SceneError> {
+    if vertices.len() < 3 {
+        return Err(SceneError::new(
+            key,
+            format!(
+                "a polygon needs at least 3 vertices, got {}",
+                vertices.len()
+            ),
+        ));
+    }
+    for v in &vertices {
+        finite(key, v.as_slice())?;
+    }
+    let poly = Polygon::new(vertices);
+    if let Some((i, j)) = poly.self_intersection() {
+        return Err(SceneError::new(
+            key,
+            format!("polygon is self-intersecting (edges {i} and {j} cross)"),
+        ));
+    }
+    let area = poly.signed_area();
+    if area < 0.0 {
+        return Err(SceneError::new(
+            key,
+            "polygon is clockwise; list its vertices counter-clockwise",
+        ));
+    }
+    if area == 0.0 {
+        return Err(SceneError::new(key, "polygon has zero area"));
+    }
+    Ok(poly)
+}
+
+impl Scene {
+    /// Parses the JSON form of a resolved scene.
+    pub fn from_json(text: &str) -> Result<Self, SceneError> {
+        serde_json::from_str(text).map_err(|e| SceneError::new("scene", e.to_string()))
+    }
+
+    /// Cell width h (m).
+    pub fn cell_size(&self) -> Real {
+        self.grid.domain[0] / self.grid.resolution as Real
+    }
+
+    fn layout(&self) -> Result<GridLayout<2>, SceneError> {
+        let g = &self.grid;
+        finite("grid.domain", &g.domain)?;
+        if g.domain.iter().any(|&l| l <= 0.0) {
+            return Err(SceneError::new(
+                "grid.domain",
+                "both sizes must be positive",
+            ));
+        }
+        if g.resolution < 2 {
+            return Err(SceneError::new(
+                "grid.resolution",
+                format!("must be at least 2, got {}", g.resolution),
+            ));
+        }
+        let h = self.cell_size();
+        let ny = g.domain[1] / h;
+        if (ny - ny.round()).abs() > 1e-9 * ny.max(1.0) || ny.round() < 2.0 {
+            return Err(SceneError::new(
+                "grid.domain",
+                format!(
+                    "height {} is not a whole number (≥ 2) of cells of width {h}",
+                    g.domain[1]
+                ),
+            ));
+        }
+        Ok(GridLayout::new(h, [g.resolution, ny.round() as usize]))
+    }
+
+    fn walls(&self, extent: Point) -> Result<(Walls2, Vec<WallMotion<2>>), SceneError> {
+        let mut shapes = Vec::new();
+        let mut motions = Vec::new();
+        for (i, w) in self.walls.iter().enumerate() {
+            let key = format!("walls[{i}]");
+            let (shape, condition, velocity) = match w {
+                WallSpec::Polygon {
+                    vertices,
+                    condition,
+                    velocity,
+                } => {
+                    let poly = checked_polygon(
+                        &format!("{key}.vertices"),
+                        vertices.iter().map(point).collect(),
+                    )?;
+                    (WallShape::Polygon(poly), condition, velocity)
+                }
+                WallSpec::Circle {
+                    center,
+                    radius,
+                    side,
+                    condition,
+                    velocity,
+                } => {
+                    finite(&format!("{key}.center"), center)?;
+                    if !(radius.is_finite() && *radius > 0.0) {
+                        return Err(SceneError::new(
+                            format!("{key}.radius"),
+                            format!("must be positive, got {radius}"),
+                        ));
+                    }
+                    let side = match side {
+                        SideSpec::Outside => Side::Outside,
+                        SideSpec::Inside => Side::Inside,
+                    };
+                    (
+                        WallShape::Circle(
+                            Circle {
+                                center: point(center),
+                                radius: *radius,
+                            },
+                            side,
+                        ),
+                        condition,
+                        velocity,
+                    )
+                }
+            };
+            finite(&format!("{key}.velocity"), velocity)?;
+            shapes.push(shape);
+            motions.push(WallMotion {
+                condition: condition.unwrap_or(self.wall_condition),
+                velocity: point(velocity),
+            });
+        }
+        // The domain box, always a wall, still.
+        motions.push(WallMotion {
+            condition: self.wall_condition,
+            velocity: Point::zeros(),
+        });
+        Ok((Walls2::new(shapes, extent), motions))
+    }
+
+    fn dt(&self, model_stable_dt: Real) -> Result<(Real, Option<String>), SceneError> {
+        let t = &self.time;
+        if t.output_interval == 0 {
+            return Err(SceneError::new(
+                "time.output_interval",
+                "must be at least 1",
+            ));
+        }
+        match (t.dt, t.cfl) {
+            (Some(dt), None) => {
+                if !(dt.is_finite() && dt > 0.0) {
+                    return Err(SceneError::new(
+                        "time.dt",
+                        format!("must be positive, got {dt}"),
+                    ));
+                }
+                let warning = (dt > model_stable_dt).then(|| {
+                    format!(
+                        "time.dt = {dt:e} s exceeds the stable bound {model_stable_dt:e} s of the materials \
+                         (one cell per step at the wave speed, or the viscous limit); the run may blow up"
+                    )
+                });
+                Ok((dt, warning))
+            }
+            (None, Some(cfl)) => {
+                if !(cfl.is_finite() && cfl > 0.0 && cfl <= 1.0) {
+                    return Err(SceneError::new(
+                        "time.cfl",
+                        format!("must lie in (0, 1], got {cfl}"),
+                    ));
+                }
+                Ok((cfl * model_stable_dt, None))
+            }
+            (Some(_), Some(_)) => Err(SceneError::new("time", "give either dt or cfl, not both")),
+            (None, None) => Err(SceneError::new("time", "give dt or cfl")),
+        }
+    }
+
+    /// Validates the scene and builds the simulation. Returns warnings beside it.
+    pub fn build(&self, method: Method) -> Result<(Simulation<2>, Vec<String>), SceneError> {
+        if method == Method::Augmented {
+            return Err(SceneError::new(
+                "method",
+                "the augmented grid is not implemented yet; use method = \"naive\"",
+            ));
+        }
+        finite("gravity", &self.gravity)?;
+        let layout = self.layout()?;
+        let h = layout.h;
+        let extent = Point::new(layout.extent()[0], layout.extent()[1]);
+        let (region, motions) = self.walls(extent)?;
+        if self.bodies.is_empty() {
+            return Err(SceneError::new("bodies", "a scene needs at least one body"));
+        }
+        let mut materials = Vec::new();
+        let mut particles = Particles::<2>::default();
+        for (b, body) in self.bodies.iter().enumerate() {
+            let key = format!("bodies[{b}]");
+            body.material
+                .validate()
+                .map_err(|(k, reason)| SceneError::new(format!("{key}.material.{k}"), reason))?;
+            finite(&format!("{key}.velocity"), &body.velocity)?;
+            materials.push(body.material.clone());
+            let first = particles.len();
+            seed_body(&key, body, b, self.seed, h, &mut particles)?;
+            let outside = (first..particles.len())
+                .filter(|&p| region.distance(&particles.x[p]).distance > 0.0)
+                .count();
+            if outside > 0 {
+                return Err(SceneError::new(
+                    key,
+                    format!(
+                        "body lies partly outside the walls ({outside} of {} particles)",
+                        particles.len() - first
+                    ),
+                ));
+            }
+        }
+        let boundary = NaiveBoundary::new(&layout, &region, motions);
+        let mut model = Model {
+            layout,
+            materials,
+            gravity: point(&self.gravity),
+            region: Box::new(region),
+            boundary,
+            dt: 0.0,
+        };
+        let (dt, warning) = self.dt(model.stable_dt())?;
+        model.dt = dt;
+        Ok((
+            Simulation::new(model, particles),
+            warning.into_iter().collect(),
+        ))
+    }
+}
+
+/// Seeds one body on a jittered grid aligned with the domain origin.
+fn seed_body(
+    key: &str,
+    body: &BodySpec,
+    index: usize,
+    seed: u64,
+    h: Real,
+    out: &mut Particles<2>,
+) -> Result<(), SceneError> {
+    let spacing = match (body.seeding.spacing, body.seeding.per_cell) {
+        (Some(s), None) if s.is_finite() && s > 0.0 => s,
+        (Some(s), None) => {
+            return Err(SceneError::new(
+                format!("{key}.seeding.spacing"),
+                format!("must be positive, got {s}"),
+            ))
+        }
+        (None, Some(n)) if n > 0 => h / (n as Real).sqrt(),
+        (None, Some(_)) => {
+            return Err(SceneError::new(
+                format!("{key}.seeding.per_cell"),
+                "must be at least 1",
+            ))
+        }
+        (None, None) => h / 2.0,
+        (Some(_), Some(_)) => {
+            return Err(SceneError::new(
+                format!("{key}.seeding"),
+                "give spacing or per_cell, not both",
+            ))
+        }
+    };
+    let (area, lo, hi, inside): (Real, Point, Point, Box<dyn Fn(&Point) -> bool>) =
+        match &body.shape {
+            BodyShape::Polygon {
+                vertices,
+                scale,
+                center,
+            } => {
+                if !(scale.is_finite() && *scale > 0.0) {
+                    return Err(SceneError::new(
+                        format!("{key}.scale"),
+                        format!("must be positive, got {scale}"),
+                    ));
+                }
+                finite(&format!("{key}.center"), center)?;
+                let c = point(center);
+                let poly = checked_polygon(
+                    &format!("{key}.vertices"),
+                    vertices.iter().map(|v| c + point(v) * *scale).collect(),
+                )?;
+                let lo = poly
+                    .vertices
+                    .iter()
+                    .fold(Point::repeat(Real::INFINITY), |a, v| a.inf(v));
+                let hi = poly
+                    .vertices
+                    .iter()
+                    .fold(Point::repeat(Real::NEG_INFINITY), |a, v| a.sup(v));
+                (
+                    poly.signed_area(),
+                    lo,
+                    hi,
+                    Box::new(move |p| poly.contains(p)),
+                )
+            }
+            BodyShape::Box { min, max } => {
+                finite(&format!("{key}.min"), min)?;
+                finite(&format!("{key}.max"), max)?;
+                let (lo, hi) = (point(min), point(max));
+                if hi.x <= lo.x || hi.y <= lo.y {
+                    return Err(SceneError::new(
+                        format!("{key}.max"),
+                        "must exceed min along both axes",
+                    ));
+                }
+                let area = (hi.x - lo.x) * (hi.y - lo.y);
+                (
+                    area,
+                    lo,
+                    hi,
+                    Box::new(move |p| p.x >= lo.x && p.x < hi.x && p.y >= lo.y && p.y < hi.y),
+                )
+            }
+            BodyShape::Circle { center, radius } => {
+                finite(&format!("{key}.center"), center)?;
+                if !(radius.is_finite() && *radius > 0.0) {
+                    return Err(SceneError::new(
+                        format!("{key}.radius"),
+                        format!("must be positive, got {radius}"),
+                    ));
+                }
+                let circle = Circle {
+                    center: point(center),
+                    radius: *radius,
+                };
+                let r = Point::repeat(*radius);
+                let area = std::f64::consts::PI * radius * radius;
+                (
+                    area,
+                    circle.center - r,
+                    circle.center + r,
+                    Box::new(move |p| circle.contains(p)),
+                )
+            }
+        };
+    let cells = ((hi - lo) / spacing).map(|c| c.ceil() as u64 + 1);
+    if cells.x.saturating_mul(cells.y) > 200_000_000 {
+        return Err(SceneError::new(
+            format!("{key}.seeding"),
+            format!(
+                "would seed about {} points; raise the spacing",
+                cells.x * cells.y
+            ),
+        ));
+    }
+    // One stream per body, so adding a body does not reshuffle the others.
+    let mut rng = Pcg64::seed_from_u64(seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    let first = (lo / spacing).map(|c| c.floor() as i64);
+    let mut positions = Vec::new();
+    for j in 0..cells.y as i64 {
+        for i in 0..cells.x as i64 {
+            let corner = Point::new((first.x + i) as Real, (first.y + j) as Real) * spacing;
+            let p = corner + Point::new(rng.gen::<Real>(), rng.gen::<Real>()) * spacing;
+            if inside(&p) {
+                positions.push(p);
+            }
+        }
+    }
+    if positions.is_empty() {
+        return Err(SceneError::new(
+            format!("{key}.seeding"),
+            format!(
+                "no particle was seeded (the body is smaller than the seeding spacing {spacing} m)"
+            ),
+        ));
+    }
+    let n = positions.len() as Real;
+    let density = crate::material::ConstitutiveModel::<2>::density(&body.material);
+    let (mass, vol0) = (area * density / n, area / n);
+    let v = point(&body.velocity);
+    for p in positions {
+        out.push(p, v, mass, vol0, index as u32, index as u32);
+    }
+    Ok(())
+}
