@@ -24,12 +24,7 @@ impl WallCondition {
     /// Applies the condition to velocity `v` at a wall of outward normal `n`
     /// (unit, into the wall) moving at `wall_v` (its geometry stays still).
     #[inline]
-    pub fn apply<const D: usize>(
-        self,
-        v: Vector<D>,
-        n: &Vector<D>,
-        wall_v: &Vector<D>,
-    ) -> Vector<D> {
+    pub fn apply<const D: usize>(self, v: Vector<D>, n: &Vector<D>, wall_v: &Vector<D>) -> Vector<D> {
         let rel = v - wall_v;
         let vn = rel.dot(n);
         match self {
@@ -71,11 +66,7 @@ impl<const D: usize> NaiveBoundary<D> {
         let nodes = (0..layout.num_nodes())
             .filter_map(|node| {
                 let d = region.distance(&layout.position(node));
-                (d.distance >= 0.0).then_some(WallNode {
-                    node,
-                    normal: d.normal,
-                    wall: d.wall,
-                })
+                (d.distance >= 0.0).then_some(WallNode { node, normal: d.normal, wall: d.wall })
             })
             .collect();
         Self { nodes, walls }
@@ -115,24 +106,12 @@ mod tests {
         let into = Vector2::new(2.0, -3.0);
         let away = Vector2::new(2.0, 3.0);
         assert_eq!(WallCondition::Sticky.apply(into, &n, &still), still);
-        assert_eq!(
-            WallCondition::Slip.apply(into, &n, &still),
-            Vector2::new(2.0, 0.0)
-        );
-        assert_eq!(
-            WallCondition::Slip.apply(away, &n, &still),
-            Vector2::new(2.0, 0.0)
-        );
-        assert_eq!(
-            WallCondition::Separate.apply(into, &n, &still),
-            Vector2::new(2.0, 0.0)
-        );
+        assert_eq!(WallCondition::Slip.apply(into, &n, &still), Vector2::new(2.0, 0.0));
+        assert_eq!(WallCondition::Slip.apply(away, &n, &still), Vector2::new(2.0, 0.0));
+        assert_eq!(WallCondition::Separate.apply(into, &n, &still), Vector2::new(2.0, 0.0));
         assert_eq!(WallCondition::Separate.apply(away, &n, &still), away);
         let belt = Vector2::new(1.5, 0.0);
         assert_eq!(WallCondition::Sticky.apply(into, &n, &belt), belt);
-        assert_eq!(
-            WallCondition::Slip.apply(into, &n, &belt),
-            Vector2::new(2.0, 0.0)
-        );
+        assert_eq!(WallCondition::Slip.apply(into, &n, &belt), Vector2::new(2.0, 0.0));
     }
 }

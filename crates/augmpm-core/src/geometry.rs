@@ -42,10 +42,7 @@ impl Polygon {
 
     /// Signed area (m²): positive for counter-clockwise vertices (shoelace formula).
     pub fn signed_area(&self) -> Real {
-        0.5 * self
-            .edges()
-            .map(|(a, b)| a.x * b.y - b.x * a.y)
-            .sum::<Real>()
+        0.5 * self.edges().map(|(a, b)| a.x * b.y - b.x * a.y).sum::<Real>()
     }
 
     /// Point-in-polygon by the even–odd crossing rule.
@@ -124,9 +121,7 @@ fn on_segment(a: &Point, b: &Point, p: &Point) -> bool {
 pub fn segments_intersect(a: &Point, b: &Point, c: &Point, d: &Point) -> bool {
     let (o1, o2) = (orient(a, b, c), orient(a, b, d));
     let (o3, o4) = (orient(c, d, a), orient(c, d, b));
-    if ((o1 > 0.0 && o2 < 0.0) || (o1 < 0.0 && o2 > 0.0))
-        && ((o3 > 0.0 && o4 < 0.0) || (o3 < 0.0 && o4 > 0.0))
-    {
+    if ((o1 > 0.0 && o2 < 0.0) || (o1 < 0.0 && o2 > 0.0)) && ((o3 > 0.0 && o4 < 0.0) || (o3 < 0.0 && o4 > 0.0)) {
         return true;
     }
     (o1 == 0.0 && on_segment(a, b, c))
@@ -159,11 +154,7 @@ impl Circle {
     pub fn signed_distance(&self, p: &Point) -> (Real, Point) {
         let r = p - self.center;
         let n = r.norm();
-        let normal = if n > 1e-300 {
-            r / n
-        } else {
-            Point::new(1.0, 0.0)
-        };
+        let normal = if n > 1e-300 { r / n } else { Point::new(1.0, 0.0) };
         (n - self.radius, normal)
     }
 }
@@ -207,11 +198,7 @@ impl Region<2> for Walls2 {
     fn distance(&self, x: &Vector<2>) -> WallDistance<2> {
         // Intersection of constraints: the largest signed distance wins.
         let (d, n) = self.domain_box.signed_distance(x);
-        let mut out = WallDistance {
-            distance: d,
-            normal: n,
-            wall: self.box_index(),
-        };
+        let mut out = WallDistance { distance: d, normal: n, wall: self.box_index() };
         // Union of polygon containers: the smallest signed distance among them.
         let mut union: Option<WallDistance<2>> = None;
         for (i, w) in self.walls.iter().enumerate() {
@@ -219,11 +206,7 @@ impl Region<2> for Walls2 {
                 WallShape::Polygon(p) => {
                     let (d, n) = p.signed_distance(x);
                     if union.is_none_or(|u| d < u.distance) {
-                        union = Some(WallDistance {
-                            distance: d,
-                            normal: n,
-                            wall: i,
-                        });
+                        union = Some(WallDistance { distance: d, normal: n, wall: i });
                     }
                 }
                 WallShape::Circle(c, side) => {
@@ -233,11 +216,7 @@ impl Region<2> for Walls2 {
                         Side::Outside => (-d, -n),
                     };
                     if d > out.distance {
-                        out = WallDistance {
-                            distance: d,
-                            normal: n,
-                            wall: i,
-                        };
+                        out = WallDistance { distance: d, normal: n, wall: i };
                     }
                 }
             }
@@ -254,12 +233,7 @@ mod tests {
     use super::*;
 
     fn square() -> Polygon {
-        Polygon::new(vec![
-            Point::new(0.0, 0.0),
-            Point::new(1.0, 0.0),
-            Point::new(1.0, 1.0),
-            Point::new(0.0, 1.0),
-        ])
+        Polygon::new(vec![Point::new(0.0, 0.0), Point::new(1.0, 0.0), Point::new(1.0, 1.0), Point::new(0.0, 1.0)])
     }
 
     #[test]
@@ -277,31 +251,17 @@ mod tests {
     #[test]
     fn bow_tie_self_intersects_and_square_does_not() {
         assert_eq!(square().self_intersection(), None);
-        let bow = Polygon::new(vec![
-            Point::new(0.0, 0.0),
-            Point::new(1.0, 1.0),
-            Point::new(1.0, 0.0),
-            Point::new(0.0, 1.0),
-        ]);
+        let bow =
+            Polygon::new(vec![Point::new(0.0, 0.0), Point::new(1.0, 1.0), Point::new(1.0, 0.0), Point::new(0.0, 1.0)]);
         assert!(bow.self_intersection().is_some());
     }
 
     #[test]
     fn region_combines_box_polygon_and_obstacle() {
-        let tri = Polygon::new(vec![
-            Point::new(0.1, 0.1),
-            Point::new(0.9, 0.1),
-            Point::new(0.5, 0.9),
-        ]);
-        let obstacle = Circle {
-            center: Point::new(0.5, 0.3),
-            radius: 0.1,
-        };
+        let tri = Polygon::new(vec![Point::new(0.1, 0.1), Point::new(0.9, 0.1), Point::new(0.5, 0.9)]);
+        let obstacle = Circle { center: Point::new(0.5, 0.3), radius: 0.1 };
         let walls = Walls2::new(
-            vec![
-                WallShape::Polygon(tri),
-                WallShape::Circle(obstacle, Side::Outside),
-            ],
+            vec![WallShape::Polygon(tri), WallShape::Circle(obstacle, Side::Outside)],
             Point::new(1.0, 1.0),
         );
         let at_centre = walls.distance(&Point::new(0.5, 0.3));

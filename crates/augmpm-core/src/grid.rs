@@ -29,12 +29,7 @@ impl<const D: usize> GridLayout<D> {
             strides[k] = stride;
             stride *= dims[k];
         }
-        Self {
-            h,
-            cells,
-            dims,
-            strides,
-        }
+        Self { h, cells, dims, strides }
     }
 
     /// Total number of nodes, ghosts included.
@@ -96,10 +91,7 @@ pub struct GridState<const D: usize> {
 
 impl<const D: usize> GridState<D> {
     pub fn new(n: usize) -> Self {
-        Self {
-            mass: vec![0.0; n],
-            momentum: vec![Vector::<D>::zeros(); n],
-        }
+        Self { mass: vec![0.0; n], momentum: vec![Vector::<D>::zeros(); n] }
     }
 
     pub fn clear(&mut self) {
@@ -118,20 +110,10 @@ mod tests {
         assert_eq!(g.dims, [9, 8]);
         for idx in 0..g.num_nodes() {
             let c = g.coord(idx);
-            assert_eq!(
-                g.stencil_origin(&c).map(|_| ()),
-                if c[0] + 2 <= 6 && c[1] + 2 <= 5 {
-                    Some(())
-                } else {
-                    None
-                }
-            );
+            assert_eq!(g.stencil_origin(&c).map(|_| ()), if c[0] + 2 <= 6 && c[1] + 2 <= 5 { Some(()) } else { None });
         }
         assert_eq!(g.stencil_origin(&[-2, -2]), Some(0));
         assert_eq!(g.stencil_origin(&[-3, 0]), None);
-        assert!(
-            (g.position(g.stencil_origin(&[1, 2]).unwrap()) - Vector::<2>::new(0.1, 0.2)).norm()
-                < 1e-15
-        );
+        assert!((g.position(g.stencil_origin(&[1, 2]).unwrap()) - Vector::<2>::new(0.1, 0.2)).norm() < 1e-15);
     }
 }

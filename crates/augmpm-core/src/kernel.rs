@@ -28,11 +28,7 @@ impl<const D: usize> Stencil<D> {
             let f = xk - b;
             base[k] = b as i64;
             fx[k] = f;
-            w[k] = [
-                0.5 * (1.5 - f).powi(2),
-                0.75 - (f - 1.0).powi(2),
-                0.5 * (f - 0.5).powi(2),
-            ];
+            w[k] = [0.5 * (1.5 - f).powi(2), 0.75 - (f - 1.0).powi(2), 0.5 * (f - 0.5).powi(2)];
         }
         Self { base, w, fx }
     }
@@ -68,11 +64,7 @@ impl<const D: usize> MlsInverse<D> {
     /// Closed form on a whole regular stencil: `M_p = diag(1, h²/4 I)`, so
     /// `M_p⁻¹ = diag(1, 4/h² I)` and MLS-MPM reduces to APIC.
     pub fn regular(h: Real) -> Self {
-        Self {
-            alpha: 1.0,
-            beta: Vector::<D>::zeros(),
-            gamma: Matrix::<D>::identity() * (4.0 / (h * h)),
-        }
+        Self { alpha: 1.0, beta: Vector::<D>::zeros(), gamma: Matrix::<D>::identity() * (4.0 / (h * h)) }
     }
 
     /// MLS shape function of a node with weight `w` at `dpos = x_i − x_p`:
@@ -96,10 +88,7 @@ mod tests {
         let mut xs = vec![Vector2::new(0.5, 0.5), Vector2::new(0.25, 0.75)];
         for i in 0..50 {
             let t = i as Real * 0.618_033_988_75;
-            xs.push(Vector2::new(
-                1.0 + (t * 3.1).fract() * 5.0,
-                2.0 + (t * 7.3).fract() * 3.0,
-            ));
+            xs.push(Vector2::new(1.0 + (t * 3.1).fract() * 5.0, 2.0 + (t * 7.3).fract() * 3.0));
         }
         xs
     }

@@ -35,15 +35,7 @@ impl<const D: usize> Particles<D> {
     }
 
     /// Adds a particle at rest state (F = I, J_p = 1, ∇v = 0).
-    pub fn push(
-        &mut self,
-        x: Vector<D>,
-        v: Vector<D>,
-        mass: Real,
-        vol0: Real,
-        body: u32,
-        material: u32,
-    ) {
+    pub fn push(&mut self, x: Vector<D>, v: Vector<D>, mass: Real, vol0: Real, body: u32, material: u32) {
         self.x.push(x);
         self.v.push(v);
         self.c.push(Matrix::<D>::zeros());
@@ -57,19 +49,11 @@ impl<const D: usize> Particles<D> {
 
     /// Total kinetic energy ½ Σ m v² (J, or J/m in 2D), summed in particle order.
     pub fn kinetic_energy(&self) -> Real {
-        0.5 * self
-            .mass
-            .iter()
-            .zip(&self.v)
-            .map(|(m, v)| m * v.norm_squared())
-            .sum::<Real>()
+        0.5 * self.mass.iter().zip(&self.v).map(|(m, v)| m * v.norm_squared()).sum::<Real>()
     }
 
     /// Total momentum Σ m v.
     pub fn momentum(&self) -> Vector<D> {
-        self.mass
-            .iter()
-            .zip(&self.v)
-            .fold(Vector::<D>::zeros(), |acc, (m, v)| acc + v * *m)
+        self.mass.iter().zip(&self.v).fold(Vector::<D>::zeros(), |acc, (m, v)| acc + v * *m)
     }
 }

@@ -22,10 +22,7 @@ pub struct SceneError {
 
 impl SceneError {
     pub fn new(key: impl Into<String>, reason: impl Into<String>) -> Self {
-        Self {
-            key: key.into(),
-            reason: reason.into(),
-        }
+        Self { key: key.into(), reason: reason.into() }
     }
 }
 
@@ -171,30 +168,18 @@ fn finite(key: &str, values: &[Real]) -> Result<(), SceneError> {
 /// Checks a wall or body polygon: ≥ 3 finite vertices, counter-clockwise, simple.
 fn checked_polygon(key: &str, vertices: Vec<Point>) -> Result<Polygon, SceneError> {
     if vertices.len() < 3 {
-        return Err(SceneError::new(
-            key,
-            format!(
-                "a polygon needs at least 3 vertices, got {}",
-                vertices.len()
-            ),
-        ));
+        return Err(SceneError::new(key, format!("a polygon needs at least 3 vertices, got {}", vertices.len())));
     }
     for v in &vertices {
         finite(key, v.as_slice())?;
     }
     let poly = Polygon::new(vertices);
     if let Some((i, j)) = poly.self_intersection() {
-        return Err(SceneError::new(
-            key,
-            format!("polygon is self-intersecting (edges {i} and {j} cross)"),
-        ));
+        return Err(SceneError::new(key, format!("polygon is self-intersecting (edges {i} and {j} cross)")));
     }
     let area = poly.signed_area();
     if area < 0.0 {
-        return Err(SceneError::new(
-            key,
-            "polygon is clockwise; list its vertices counter-clockwise",
-        ));
+        return Err(SceneError::new(key, "polygon is clockwise; list its vertices counter-clockwise"));
     }
     if area == 0.0 {
         return Err(SceneError::new(key, "polygon has zero area"));
@@ -217,26 +202,17 @@ impl Scene {
         let g = &self.grid;
         finite("grid.domain", &g.domain)?;
         if g.domain.iter().any(|&l| l <= 0.0) {
-            return Err(SceneError::new(
-                "grid.domain",
-                "both sizes must be positive",
-            ));
+            return Err(SceneError::new("grid.domain", "both sizes must be positive"));
         }
         if g.resolution < 2 {
-            return Err(SceneError::new(
-                "grid.resolution",
-                format!("must be at least 2, got {}", g.resolution),
-            ));
+            return Err(SceneError::new("grid.resolution", format!("must be at least 2, got {}", g.resolution)));
         }
         let h = self.cell_size();
         let ny = g.domain[1] / h;
         if (ny - ny.round()).abs() > 1e-9 * ny.max(1.0) || ny.round() < 2.0 {
             return Err(SceneError::new(
                 "grid.domain",
-                format!(
-                    "height {} is not a whole number (≥ 2) of cells of width {h}",
-                    g.domain[1]
-                ),
+                format!("height {} is not a whole number (≥ 2) of cells of width {h}", g.domain[1]),
             ));
         }
         Ok(GridLayout::new(h, [g.resolution, ny.round() as usize]))
@@ -248,24 +224,11 @@ impl Scene {
         for (i, w) in self.walls.iter().enumerate() {
             let key = format!("walls[{i}]");
             let (shape, condition, velocity) = match w {
-                WallSpec::Polygon {
-                    vertices,
-                    condition,
-                    velocity,
-                } => {
-                    let poly = checked_polygon(
-                        &format!("{key}.vertices"),
-                        vertices.iter().map(point).collect(),
-                    )?;
+                WallSpec::Polygon { vertices, condition, velocity } => {
+                    let poly = checked_polygon(&format!("{key}.vertices"), vertices.iter().map(point).collect())?;
                     (WallShape::Polygon(poly), condition, velocity)
                 }
-                WallSpec::Circle {
-                    center,
-                    radius,
-                    side,
-                    condition,
-                    velocity,
-                } => {
+                WallSpec::Circle { center, radius, side, condition, velocity } => {
                     finite(&format!("{key}.center"), center)?;
                     if !(radius.is_finite() && *radius > 0.0) {
                         return Err(SceneError::new(
@@ -277,49 +240,27 @@ impl Scene {
                         SideSpec::Outside => Side::Outside,
                         SideSpec::Inside => Side::Inside,
                     };
-                    (
-                        WallShape::Circle(
-                            Circle {
-                                center: point(center),
-                                radius: *radius,
-                            },
-                            side,
-                        ),
-                        condition,
-                        velocity,
-                    )
+                    (WallShape::Circle(Circle { center: point(center), radius: *radius }, side), condition, velocity)
                 }
             };
             finite(&format!("{key}.velocity"), velocity)?;
             shapes.push(shape);
-            motions.push(WallMotion {
-                condition: condition.unwrap_or(self.wall_condition),
-                velocity: point(velocity),
-            });
+            motions.push(WallMotion { condition: condition.unwrap_or(self.wall_condition), velocity: point(velocity) });
         }
         // The domain box, always a wall, still.
-        motions.push(WallMotion {
-            condition: self.wall_condition,
-            velocity: Point::zeros(),
-        });
+        motions.push(WallMotion { condition: self.wall_condition, velocity: Point::zeros() });
         Ok((Walls2::new(shapes, extent), motions))
     }
 
     fn dt(&self, model_stable_dt: Real) -> Result<(Real, Option<String>), SceneError> {
         let t = &self.time;
         if t.output_interval == 0 {
-            return Err(SceneError::new(
-                "time.output_interval",
-                "must be at least 1",
-            ));
+            return Err(SceneError::new("time.output_interval", "must be at least 1"));
         }
         match (t.dt, t.cfl) {
             (Some(dt), None) => {
                 if !(dt.is_finite() && dt > 0.0) {
-                    return Err(SceneError::new(
-                        "time.dt",
-                        format!("must be positive, got {dt}"),
-                    ));
+                    return Err(SceneError::new("time.dt", format!("must be positive, got {dt}")));
                 }
                 let warning = (dt > model_stable_dt).then(|| {
                     format!(
@@ -331,10 +272,7 @@ impl Scene {
             }
             (None, Some(cfl)) => {
                 if !(cfl.is_finite() && cfl > 0.0 && cfl <= 1.0) {
-                    return Err(SceneError::new(
-                        "time.cfl",
-                        format!("must lie in (0, 1], got {cfl}"),
-                    ));
+                    return Err(SceneError::new("time.cfl", format!("must lie in (0, 1], got {cfl}")));
                 }
                 Ok((cfl * model_stable_dt, None))
             }
@@ -346,10 +284,7 @@ impl Scene {
     /// Validates the scene and builds the simulation. Returns warnings beside it.
     pub fn build(&self, method: Method) -> Result<(Simulation<2>, Vec<String>), SceneError> {
         if method == Method::Augmented {
-            return Err(SceneError::new(
-                "method",
-                "the augmented grid is not implemented yet; use method = \"naive\"",
-            ));
+            return Err(SceneError::new("method", "the augmented grid is not implemented yet; use method = \"naive\""));
         }
         finite("gravity", &self.gravity)?;
         let layout = self.layout()?;
@@ -363,41 +298,25 @@ impl Scene {
         let mut particles = Particles::<2>::default();
         for (b, body) in self.bodies.iter().enumerate() {
             let key = format!("bodies[{b}]");
-            body.material
-                .validate()
-                .map_err(|(k, reason)| SceneError::new(format!("{key}.material.{k}"), reason))?;
+            body.material.validate().map_err(|(k, reason)| SceneError::new(format!("{key}.material.{k}"), reason))?;
             finite(&format!("{key}.velocity"), &body.velocity)?;
             materials.push(body.material.clone());
             let first = particles.len();
             seed_body(&key, body, b, self.seed, h, &mut particles)?;
-            let outside = (first..particles.len())
-                .filter(|&p| region.distance(&particles.x[p]).distance > 0.0)
-                .count();
+            let outside = (first..particles.len()).filter(|&p| region.distance(&particles.x[p]).distance > 0.0).count();
             if outside > 0 {
                 return Err(SceneError::new(
                     key,
-                    format!(
-                        "body lies partly outside the walls ({outside} of {} particles)",
-                        particles.len() - first
-                    ),
+                    format!("body lies partly outside the walls ({outside} of {} particles)", particles.len() - first),
                 ));
             }
         }
         let boundary = NaiveBoundary::new(&layout, &region, motions);
-        let mut model = Model {
-            layout,
-            materials,
-            gravity: point(&self.gravity),
-            region: Box::new(region),
-            boundary,
-            dt: 0.0,
-        };
+        let mut model =
+            Model { layout, materials, gravity: point(&self.gravity), region: Box::new(region), boundary, dt: 0.0 };
         let (dt, warning) = self.dt(model.stable_dt())?;
         model.dt = dt;
-        Ok((
-            Simulation::new(model, particles),
-            warning.into_iter().collect(),
-        ))
+        Ok((Simulation::new(model, particles), warning.into_iter().collect()))
     }
 }
 
@@ -413,108 +332,54 @@ fn seed_body(
     let spacing = match (body.seeding.spacing, body.seeding.per_cell) {
         (Some(s), None) if s.is_finite() && s > 0.0 => s,
         (Some(s), None) => {
-            return Err(SceneError::new(
-                format!("{key}.seeding.spacing"),
-                format!("must be positive, got {s}"),
-            ))
+            return Err(SceneError::new(format!("{key}.seeding.spacing"), format!("must be positive, got {s}")))
         }
         (None, Some(n)) if n > 0 => h / (n as Real).sqrt(),
-        (None, Some(_)) => {
-            return Err(SceneError::new(
-                format!("{key}.seeding.per_cell"),
-                "must be at least 1",
-            ))
-        }
+        (None, Some(_)) => return Err(SceneError::new(format!("{key}.seeding.per_cell"), "must be at least 1")),
         (None, None) => h / 2.0,
         (Some(_), Some(_)) => {
-            return Err(SceneError::new(
-                format!("{key}.seeding"),
-                "give spacing or per_cell, not both",
-            ))
+            return Err(SceneError::new(format!("{key}.seeding"), "give spacing or per_cell, not both"))
         }
     };
-    let (area, lo, hi, inside): (Real, Point, Point, Box<dyn Fn(&Point) -> bool>) =
-        match &body.shape {
-            BodyShape::Polygon {
-                vertices,
-                scale,
-                center,
-            } => {
-                if !(scale.is_finite() && *scale > 0.0) {
-                    return Err(SceneError::new(
-                        format!("{key}.scale"),
-                        format!("must be positive, got {scale}"),
-                    ));
-                }
-                finite(&format!("{key}.center"), center)?;
-                let c = point(center);
-                let poly = checked_polygon(
-                    &format!("{key}.vertices"),
-                    vertices.iter().map(|v| c + point(v) * *scale).collect(),
-                )?;
-                let lo = poly
-                    .vertices
-                    .iter()
-                    .fold(Point::repeat(Real::INFINITY), |a, v| a.inf(v));
-                let hi = poly
-                    .vertices
-                    .iter()
-                    .fold(Point::repeat(Real::NEG_INFINITY), |a, v| a.sup(v));
-                (
-                    poly.signed_area(),
-                    lo,
-                    hi,
-                    Box::new(move |p| poly.contains(p)),
-                )
+    let (area, lo, hi, inside): (Real, Point, Point, Box<dyn Fn(&Point) -> bool>) = match &body.shape {
+        BodyShape::Polygon { vertices, scale, center } => {
+            if !(scale.is_finite() && *scale > 0.0) {
+                return Err(SceneError::new(format!("{key}.scale"), format!("must be positive, got {scale}")));
             }
-            BodyShape::Box { min, max } => {
-                finite(&format!("{key}.min"), min)?;
-                finite(&format!("{key}.max"), max)?;
-                let (lo, hi) = (point(min), point(max));
-                if hi.x <= lo.x || hi.y <= lo.y {
-                    return Err(SceneError::new(
-                        format!("{key}.max"),
-                        "must exceed min along both axes",
-                    ));
-                }
-                let area = (hi.x - lo.x) * (hi.y - lo.y);
-                (
-                    area,
-                    lo,
-                    hi,
-                    Box::new(move |p| p.x >= lo.x && p.x < hi.x && p.y >= lo.y && p.y < hi.y),
-                )
+            finite(&format!("{key}.center"), center)?;
+            let c = point(center);
+            let poly =
+                checked_polygon(&format!("{key}.vertices"), vertices.iter().map(|v| c + point(v) * *scale).collect())?;
+            let lo = poly.vertices.iter().fold(Point::repeat(Real::INFINITY), |a, v| a.inf(v));
+            let hi = poly.vertices.iter().fold(Point::repeat(Real::NEG_INFINITY), |a, v| a.sup(v));
+            (poly.signed_area(), lo, hi, Box::new(move |p| poly.contains(p)))
+        }
+        BodyShape::Box { min, max } => {
+            finite(&format!("{key}.min"), min)?;
+            finite(&format!("{key}.max"), max)?;
+            let (lo, hi) = (point(min), point(max));
+            if hi.x <= lo.x || hi.y <= lo.y {
+                return Err(SceneError::new(format!("{key}.max"), "must exceed min along both axes"));
             }
-            BodyShape::Circle { center, radius } => {
-                finite(&format!("{key}.center"), center)?;
-                if !(radius.is_finite() && *radius > 0.0) {
-                    return Err(SceneError::new(
-                        format!("{key}.radius"),
-                        format!("must be positive, got {radius}"),
-                    ));
-                }
-                let circle = Circle {
-                    center: point(center),
-                    radius: *radius,
-                };
-                let r = Point::repeat(*radius);
-                let area = std::f64::consts::PI * radius * radius;
-                (
-                    area,
-                    circle.center - r,
-                    circle.center + r,
-                    Box::new(move |p| circle.contains(p)),
-                )
+            let area = (hi.x - lo.x) * (hi.y - lo.y);
+            (area, lo, hi, Box::new(move |p| p.x >= lo.x && p.x < hi.x && p.y >= lo.y && p.y < hi.y))
+        }
+        BodyShape::Circle { center, radius } => {
+            finite(&format!("{key}.center"), center)?;
+            if !(radius.is_finite() && *radius > 0.0) {
+                return Err(SceneError::new(format!("{key}.radius"), format!("must be positive, got {radius}")));
             }
-        };
+            let circle = Circle { center: point(center), radius: *radius };
+            let r = Point::repeat(*radius);
+            let area = std::f64::consts::PI * radius * radius;
+            (area, circle.center - r, circle.center + r, Box::new(move |p| circle.contains(p)))
+        }
+    };
     let cells = ((hi - lo) / spacing).map(|c| c.ceil() as u64 + 1);
     if cells.x.saturating_mul(cells.y) > 200_000_000 {
         return Err(SceneError::new(
             format!("{key}.seeding"),
-            format!(
-                "would seed about {} points; raise the spacing",
-                cells.x * cells.y
-            ),
+            format!("would seed about {} points; raise the spacing", cells.x * cells.y),
         ));
     }
     // One stream per body, so adding a body does not reshuffle the others.
@@ -533,9 +398,7 @@ fn seed_body(
     if positions.is_empty() {
         return Err(SceneError::new(
             format!("{key}.seeding"),
-            format!(
-                "no particle was seeded (the body is smaller than the seeding spacing {spacing} m)"
-            ),
+            format!("no particle was seeded (the body is smaller than the seeding spacing {spacing} m)"),
         ));
     }
     let n = positions.len() as Real;

@@ -28,9 +28,7 @@ where
     Dim<D>: DimOps<D>,
 {
     fn needs_grid_density(&self) -> bool {
-        self.materials
-            .iter()
-            .any(|m| ConstitutiveModel::<D>::needs_grid_density(m))
+        self.materials.iter().any(|m| ConstitutiveModel::<D>::needs_grid_density(m))
     }
 
     /// The smallest stable time step (s) of the model's materials on its grid.
@@ -94,13 +92,7 @@ where
             density: vec![0.0; n],
             stress: vec![Matrix::<D>::zeros(); n],
         };
-        Self {
-            model,
-            particles,
-            step: 0,
-            time: 0.0,
-            scratch,
-        }
+        Self { model, particles, step: 0, time: 0.0, scratch }
     }
 
     /// One explicit MLS-MPM step: (density) → stress → P2G → grid update and
@@ -108,58 +100,20 @@ where
     pub fn step(&mut self) -> Result<(), StepError> {
         let step = self.step + 1;
         let left = |OutOfGrid(particle)| StepError::LeftGrid { step, particle };
-        let Self {
-            model,
-            particles,
-            scratch,
-            ..
-        } = self;
+        let Self { model, particles, scratch, .. } = self;
         let layout = &model.layout;
         let dt = model.dt;
         let minv = MlsInverse::regular(layout.h);
 
         if model.needs_grid_density() {
-            transfer::scatter_mass(
-                layout,
-                &particles.x,
-                &particles.mass,
-                &mut scratch.grid.mass,
-            )
-            .map_err(left)?;
-            transfer::gather_density(
-                layout,
-                &particles.x,
-                &scratch.grid.mass,
-                &mut scratch.density,
-            );
+            transfer::scatter_mass(layout, &particles.x, &particles.mass, &mut scratch.grid.mass).map_err(left)?;
+            transfer::gather_density(layout, &particles.x, &scratch.grid.mass, &mut scratch.density);
         }
-        transfer::compute_stress(
-            &model.materials,
-            particles,
-            &scratch.density,
-            &mut scratch.stress,
-        );
-        transfer::p2g(
-            layout,
-            particles,
-            &scratch.stress,
-            &minv,
-            dt,
-            &mut scratch.grid,
-        )
-        .map_err(left)?;
+        transfer::compute_stress(&model.materials, particles, &scratch.density, &mut scratch.stress);
+        transfer::p2g(layout, particles, &scratch.stress, &minv, dt, &mut scratch.grid).map_err(left)?;
         transfer::grid_velocity(&mut scratch.grid, &model.gravity, dt);
-        model
-            .boundary
-            .apply(&scratch.grid.mass, &mut scratch.grid.momentum);
-        transfer::g2p(
-            layout,
-            &scratch.grid.momentum,
-            &minv,
-            &particles.x,
-            &mut particles.v,
-            &mut particles.c,
-        );
+        model.boundary.apply(&scratch.grid.mass, &mut scratch.grid.momentum);
+        transfer::g2p(layout, &scratch.grid.momentum, &minv, &particles.x, &mut particles.v, &mut particles.c);
         transfer::advect(&model.materials, particles, dt);
 
         self.step = step;

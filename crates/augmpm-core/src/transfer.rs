@@ -22,10 +22,7 @@ fn stencil_of<const D: usize>(
     p: usize,
 ) -> Result<(Stencil<D>, usize), OutOfGrid> {
     let s = Stencil::new(x, 1.0 / layout.h);
-    layout
-        .stencil_origin(&s.base)
-        .map(|o| (s, o))
-        .ok_or(OutOfGrid(p))
+    layout.stencil_origin(&s.base).map(|o| (s, o)).ok_or(OutOfGrid(p))
 }
 
 /// Scatters particle masses to the regular grid with the B-spline weights
@@ -39,9 +36,7 @@ pub fn scatter_mass<const D: usize>(
     grid_mass.fill(0.0);
     for (p, (xp, mp)) in x.iter().zip(mass).enumerate() {
         let (s, origin) = stencil_of(layout, xp, p)?;
-        s.for_each(layout.h, |o, w, _| {
-            grid_mass[origin + layout.offset(&o)] += w * mp
-        });
+        s.for_each(layout.h, |o, w, _| grid_mass[origin + layout.offset(&o)] += w * mp);
     }
     Ok(())
 }
@@ -54,21 +49,14 @@ pub fn gather_density<const D: usize>(
     density: &mut [Real],
 ) {
     let inv_cell_volume = layout.h.powi(-(D as i32));
-    density
-        .par_iter_mut()
-        .zip(x.par_iter())
-        .for_each(|(rho, xp)| {
-            let s = Stencil::new(xp, 1.0 / layout.h);
-            // Stencils were checked by scatter_mass on the same positions.
-            let origin = layout
-                .stencil_origin(&s.base)
-                .expect("stencil checked by scatter_mass");
-            let mut sum = 0.0;
-            s.for_each(layout.h, |o, w, _| {
-                sum += w * grid_mass[origin + layout.offset(&o)]
-            });
-            *rho = sum * inv_cell_volume;
-        });
+    density.par_iter_mut().zip(x.par_iter()).for_each(|(rho, xp)| {
+        let s = Stencil::new(xp, 1.0 / layout.h);
+        // Stencils were checked by scatter_mass on the same positions.
+        let origin = layout.stencil_origin(&s.base).expect("stencil checked by scatter_mass");
+        let mut sum = 0.0;
+        s.for_each(layout.h, |o, w, _| sum += w * grid_mass[origin + layout.offset(&o)]);
+        *rho = sum * inv_cell_volume;
+    });
 }
 
 /// Computes `V_p σ_p` of every particle with its material.
@@ -123,16 +111,9 @@ pub fn p2g<const D: usize>(
 /// Nodes without mass get zero velocity.
 pub fn grid_velocity<const D: usize>(grid: &mut GridState<D>, gravity: &Vector<D>, dt: Real) {
     let dv = gravity * dt;
-    grid.momentum
-        .par_iter_mut()
-        .zip(grid.mass.par_iter())
-        .for_each(|(mv, &m)| {
-            *mv = if m > 0.0 {
-                *mv / m + dv
-            } else {
-                Vector::<D>::zeros()
-            };
-        });
+    grid.momentum.par_iter_mut().zip(grid.mass.par_iter()).for_each(|(mv, &m)| {
+        *mv = if m > 0.0 { *mv / m + dv } else { Vector::<D>::zeros() };
+    });
 }
 
 /// Grid→particle transfer: `v_p = Σ φ v_i`, `C_p = Σ v_i gᵀ` (eq. (4)).
@@ -144,25 +125,20 @@ pub fn g2p<const D: usize>(
     v: &mut [Vector<D>],
     c: &mut [Matrix<D>],
 ) {
-    v.par_iter_mut()
-        .zip(c.par_iter_mut())
-        .zip(x.par_iter())
-        .for_each(|((vp, cp), xp)| {
-            let s = Stencil::new(xp, 1.0 / layout.h);
-            let origin = layout
-                .stencil_origin(&s.base)
-                .expect("stencil checked by p2g");
-            let mut vn = Vector::<D>::zeros();
-            let mut cn = Matrix::<D>::zeros();
-            s.for_each(layout.h, |o, w, dpos| {
-                let vi = velocity[origin + layout.offset(&o)];
-                let (phi, g) = minv.shape(w, &dpos);
-                vn += vi * phi;
-                cn += vi * g.transpose();
-            });
-            *vp = vn;
-            *cp = cn;
+    v.par_iter_mut().zip(c.par_iter_mut()).zip(x.par_iter()).for_each(|((vp, cp), xp)| {
+        let s = Stencil::new(xp, 1.0 / layout.h);
+        let origin = layout.stencil_origin(&s.base).expect("stencil checked by p2g");
+        let mut vn = Vector::<D>::zeros();
+        let mut cn = Matrix::<D>::zeros();
+        s.for_each(layout.h, |o, w, dpos| {
+            let vi = velocity[origin + layout.offset(&o)];
+            let (phi, g) = minv.shape(w, &dpos);
+            vn += vi * phi;
+            cn += vi * g.transpose();
         });
+        *vp = vn;
+        *cp = cn;
+    });
 }
 
 /// Advection `x += dt v` and the deformation update of each material.
@@ -170,15 +146,7 @@ pub fn advect<const D: usize>(materials: &[Material], particles: &mut Particles<
 where
     Dim<D>: DimOps<D>,
 {
-    let Particles {
-        x,
-        v,
-        c,
-        f,
-        jp,
-        material,
-        ..
-    } = particles;
+    let Particles { x, v, c, f, jp, material, .. } = particles;
     x.par_iter_mut()
         .zip(v.par_iter())
         .zip(c.par_iter())
@@ -209,9 +177,7 @@ mod tests {
         let mut ps = Particles::<2>::default();
         let mut s = 12345u64;
         let mut rnd = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             (s >> 11) as f64 / (1u64 << 53) as f64
         };
         for _ in 0..n {
@@ -225,13 +191,7 @@ mod tests {
         ps
     }
 
-    fn angular_momentum(
-        x: &[Vector2<f64>],
-        v: &[Vector2<f64>],
-        m: &[f64],
-        c: &[Matrix2<f64>],
-        h: f64,
-    ) -> f64 {
+    fn angular_momentum(x: &[Vector2<f64>], v: &[Vector2<f64>], m: &[f64], c: &[Matrix2<f64>], h: f64) -> f64 {
         // Particle angular momentum including the APIC affine part: Σ m (x × v) + m h²/4 (C₁₀ − C₀₁).
         x.iter()
             .zip(v)
@@ -257,15 +217,10 @@ mod tests {
         let l_particles = angular_momentum(&ps.x, &ps.v, &ps.mass, &ps.c, h);
         let grid_mass: f64 = grid.mass.iter().sum();
         let p_grid = grid.momentum.iter().fold(Vector2::zeros(), |a, b| a + b);
-        let l_grid: f64 = (0..layout.num_nodes())
-            .map(|i| layout.position(i).perp(&grid.momentum[i]))
-            .sum();
+        let l_grid: f64 = (0..layout.num_nodes()).map(|i| layout.position(i).perp(&grid.momentum[i])).sum();
         assert!((grid_mass - mass).abs() < 1e-12 * mass);
         assert!((p_grid - p_particles).norm() < 1e-12 * mass);
-        assert!(
-            (l_grid - l_particles).abs() < 1e-12 * mass,
-            "{l_grid} vs {l_particles}"
-        );
+        assert!((l_grid - l_particles).abs() < 1e-12 * mass, "{l_grid} vs {l_particles}");
 
         grid_velocity(&mut grid, &Vector2::zeros(), 1e-3);
         let (x, mut v, mut c) = (ps.x.clone(), ps.v.clone(), ps.c.clone());
@@ -274,14 +229,8 @@ mod tests {
         ps.c = c;
         let p_back = ps.momentum();
         let l_back = angular_momentum(&ps.x, &ps.v, &ps.mass, &ps.c, h);
-        assert!(
-            (p_back - p_particles).norm() < 1e-12 * mass,
-            "{p_back} vs {p_particles}"
-        );
-        assert!(
-            (l_back - l_particles).abs() < 1e-12 * mass,
-            "{l_back} vs {l_particles}"
-        );
+        assert!((p_back - p_particles).norm() < 1e-12 * mass, "{p_back} vs {p_particles}");
+        assert!((l_back - l_particles).abs() < 1e-12 * mass, "{l_back} vs {l_particles}");
     }
 
     /// A particle whose stencil leaves the grid is reported by index, not indexed out of bounds.
@@ -291,9 +240,6 @@ mod tests {
         let mut ps = random_particles(3);
         ps.x[1] = Vector2::new(-0.5, 0.2);
         let mut mass = vec![0.0; layout.num_nodes()];
-        assert_eq!(
-            scatter_mass(&layout, &ps.x, &ps.mass, &mut mass),
-            Err(OutOfGrid(1))
-        );
+        assert_eq!(scatter_mass(&layout, &ps.x, &ps.mass, &mut mass), Err(OutOfGrid(1)));
     }
 }

@@ -1,1 +1,156 @@
+//! Python bindings of augmpm-core, the module `augmpm._core`.
+//!
+//! The Python package validates scene files and hands the resolved scene to
+//! [`PySimulation`] as JSON; arrays come back as numpy arrays.
 
+mod errors;
+
+use augmpm_core::{Method, Scene, Simulation};
+use numpy::{PyArray1, PyArray2, PyArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use errors::{scene_error, simulation_error};
+
+/// A 2D simulation built from a resolved scene (JSON) with a boundary method.
+#[pyclass(name = "Simulation", module = "augmpm._core")]
+struct PySimulation {
+    sim: Simulation<2>,
+    warnings: Vec<String>,
+}
+
+fn vectors_to_array<'py>(py: Python<'py>, v: &[nalgebra::Vector2<f64>]) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let flat: Vec<f64> = v.iter().flat_map(|x| [x[0], x[1]]).collect();
+    PyArray1::from_vec(py, flat).reshape([v.len(), 2])
+}
+
+#[pymethods]
+impl PySimulation {
+    #[new]
+    fn new(scene_json: &str, method: &str) -> PyResult<Self> {
+        let method = match method {
+            "naive" => Method::Naive,
+            "augmented" => Method::Augmented,
+            other => {
+                return Err(scene_error(
+                    "method",
+                    &format!("unknown method {other:?}; expected \"naive\" or \"augmented\""),
+                ))
+            }
+        };
+        let scene = Scene::from_json(scene_json).map_err(|e| scene_error(&e.key, &e.reason))?;
+        let (sim, warnings) = scene.build(method).map_err(|e| scene_error(&e.key, &e.reason))?;
+        Ok(Self { sim, warnings })
+    }
+
+    /// Takes `n` steps (the GIL is released meanwhile). Raises SimulationError on failure;
+    /// the state is then that of the failing step.
+    fn step(&mut self, py: Python<'_>, n: u64) -> PyResult<()> {
+        let sim = &mut self.sim;
+        py.allow_threads(|| sim.advance(n)).map_err(simulation_error)
+    }
+
+    /// Particle positions (m), shape (N, 2).
+    #[getter]
+    fn positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        vectors_to_array(py, &self.sim.particles.x)
+    }
+
+    /// Particle velocities (m/s), shape (N, 2).
+    #[getter]
+    fn velocities<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        vectors_to_array(py, &self.sim.particles.v)
+    }
+
+    /// Index of each particle's body, shape (N,).
+    #[getter]
+    fn body<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i32>> {
+        PyArray1::from_iter(py, self.sim.particles.body.iter().map(|&b| b as i32))
+    }
+
+    /// Particle masses (kg/m in 2D), shape (N,).
+    #[getter]
+    fn masses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, &self.sim.particles.mass)
+    }
+
+    #[getter]
+    fn num_particles(&self) -> usize {
+        self.sim.particles.len()
+    }
+
+    /// Time (s).
+    #[getter]
+    fn time(&self) -> f64 {
+        self.sim.time
+    }
+
+    /// Steps taken so far.
+    #[getter]
+    fn steps_done(&self) -> u64 {
+        self.sim.step
+    }
+
+    /// Time step (s).
+    #[getter]
+    fn dt(&self) -> f64 {
+        self.sim.model.dt
+    }
+
+    /// The materials' stable time step (s) on this grid.
+    #[getter]
+    fn stable_dt(&self) -> f64 {
+        self.sim.model.stable_dt()
+    }
+
+    /// Grid cell width h (m).
+    #[getter]
+    fn cell_size(&self) -> f64 {
+        self.sim.model.layout.h
+    }
+
+    /// Warnings raised while building the simulation (e.g. dt above the stable bound).
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.warnings.clone()
+    }
+
+    /// Signed distance (m) of points (M, 2) to the walls, positive outside the material region.
+    fn wall_distance<'py>(
+        &self,
+        py: Python<'py>,
+        points: numpy::PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let a = points.as_array();
+        if a.ncols() != 2 {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "points must have shape (M, 2), got {:?}",
+                a.shape()
+            )));
+        }
+        let region = self.sim.model.region.as_ref();
+        let d: Vec<f64> =
+            a.rows().into_iter().map(|r| region.distance(&nalgebra::Vector2::new(r[0], r[1])).distance).collect();
+        Ok(PyArray1::from_vec(py, d))
+    }
+
+    /// Step, time, kinetic energy, particles outside the walls and the deepest penetration (cell widths).
+    fn metrics<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let m = self.sim.metrics();
+        let d = PyDict::new(py);
+        d.set_item("step", m.step)?;
+        d.set_item("time", m.time)?;
+        d.set_item("kinetic_energy", m.kinetic_energy)?;
+        d.set_item("n_outside", m.n_outside)?;
+        d.set_item("max_penetration", m.max_penetration)?;
+        Ok(d)
+    }
+}
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PySimulation>()?;
+    errors::register(m)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

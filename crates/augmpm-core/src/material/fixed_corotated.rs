@@ -66,11 +66,7 @@ mod tests {
     /// Uniaxial stretch F = diag(s, 1) (R = I, J = s): τ_xx = 2μ(s − 1)s + λ(s − 1)s, τ_yy = λ(s − 1)s.
     #[test]
     fn uniaxial_stretch_gives_analytic_stress() {
-        let m = FixedCorotated {
-            density: 1000.0,
-            youngs_modulus: 1e6,
-            poisson_ratio: 0.3,
-        };
+        let m = FixedCorotated { density: 1000.0, youngs_modulus: 1e6, poisson_ratio: 0.3 };
         let (mu, lambda) = lame(1e6, 0.3);
         let s = 1.2;
         let p = MaterialPoint::<2> {
@@ -90,11 +86,7 @@ mod tests {
     /// A pure rotation carries no stress.
     #[test]
     fn rotation_is_stress_free() {
-        let m = FixedCorotated {
-            density: 1000.0,
-            youngs_modulus: 1e6,
-            poisson_ratio: 0.3,
-        };
+        let m = FixedCorotated { density: 1000.0, youngs_modulus: 1e6, poisson_ratio: 0.3 };
         let (c, s) = (0.8f64.cos(), 0.8f64.sin());
         let p = MaterialPoint::<2> {
             f: Matrix2::new(c, -s, s, c),

@@ -38,8 +38,7 @@ impl WeaklyCompressibleFluid {
 
     /// Cauchy stress (Pa) at density `rho` and velocity gradient `grad_v` (1/s).
     pub fn cauchy_stress<const D: usize>(&self, rho: Real, grad_v: &Matrix<D>) -> Matrix<D> {
-        Matrix::<D>::identity() * -self.pressure(rho)
-            + (grad_v + grad_v.transpose()) * self.viscosity
+        Matrix::<D>::identity() * -self.pressure(rho) + (grad_v + grad_v.transpose()) * self.viscosity
     }
 
     pub(super) fn validate(&self) -> Result<(), (&'static str, String)> {
@@ -48,10 +47,7 @@ impl WeaklyCompressibleFluid {
         positive("gamma", self.gamma)?;
         non_negative("viscosity", self.viscosity)?;
         if !self.min_pressure.is_finite() || self.min_pressure > 0.0 {
-            return Err((
-                "min_pressure",
-                format!("must be finite and <= 0, got {}", self.min_pressure),
-            ));
+            return Err(("min_pressure", format!("must be finite and <= 0, got {}", self.min_pressure)));
         }
         Ok(())
     }
@@ -63,13 +59,7 @@ impl<const D: usize> ConstitutiveModel<D> for WeaklyCompressibleFluid {
         self.cauchy_stress(p.density, &p.grad_v) * volume
     }
 
-    fn update_deformation(
-        &self,
-        _f: &mut Matrix<D>,
-        _jp: &mut Real,
-        _grad_v: &Matrix<D>,
-        _dt: Real,
-    ) {
+    fn update_deformation(&self, _f: &mut Matrix<D>, _jp: &mut Real, _grad_v: &Matrix<D>, _dt: Real) {
         // The fluid's state is its grid density; F is not needed.
     }
 
@@ -85,11 +75,7 @@ impl<const D: usize> ConstitutiveModel<D> for WeaklyCompressibleFluid {
         // Sound speed c² = dp/dρ at rest = kγ/ρ0; viscous diffusion needs ν dt/h² ≤ 1/(2D).
         let sound = h / (self.stiffness * self.gamma / self.density).sqrt();
         let nu = self.viscosity / self.density;
-        let viscous = if nu > 0.0 {
-            h * h / (2.0 * D as Real * nu)
-        } else {
-            Real::INFINITY
-        };
+        let viscous = if nu > 0.0 { h * h / (2.0 * D as Real * nu) } else { Real::INFINITY };
         sound.min(viscous)
     }
 }
@@ -100,13 +86,7 @@ mod tests {
     use nalgebra::Matrix2;
 
     fn water() -> WeaklyCompressibleFluid {
-        WeaklyCompressibleFluid {
-            density: 1000.0,
-            stiffness: 1e5,
-            gamma: 4.0,
-            viscosity: 2.0,
-            min_pressure: -100.0,
-        }
+        WeaklyCompressibleFluid { density: 1000.0, stiffness: 1e5, gamma: 4.0, viscosity: 2.0, min_pressure: -100.0 }
     }
 
     /// A uniaxial stretching flow ∂u/∂x = s at rest density gives σ_xx = 2μs, σ_yy = 0 (no pressure).

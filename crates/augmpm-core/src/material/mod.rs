@@ -57,8 +57,7 @@ pub trait ConstitutiveModel<const D: usize> {
 /// Lamé parameters (Pa) from Young's modulus (Pa) and Poisson's ratio.
 pub fn lame(youngs_modulus: Real, poisson_ratio: Real) -> (Real, Real) {
     let mu = youngs_modulus / (2.0 * (1.0 + poisson_ratio));
-    let lambda =
-        youngs_modulus * poisson_ratio / ((1.0 + poisson_ratio) * (1.0 - 2.0 * poisson_ratio));
+    let lambda = youngs_modulus * poisson_ratio / ((1.0 + poisson_ratio) * (1.0 - 2.0 * poisson_ratio));
     (mu, lambda)
 }
 
@@ -144,10 +143,7 @@ pub(crate) fn positive(key: &'static str, value: Real) -> Result<(), (&'static s
     if value.is_finite() && value > 0.0 {
         Ok(())
     } else {
-        Err((
-            key,
-            format!("must be a positive finite number, got {value}"),
-        ))
+        Err((key, format!("must be a positive finite number, got {value}")))
     }
 }
 
@@ -156,10 +152,7 @@ pub(crate) fn non_negative(key: &'static str, value: Real) -> Result<(), (&'stat
     if value.is_finite() && value >= 0.0 {
         Ok(())
     } else {
-        Err((
-            key,
-            format!("must be a non-negative finite number, got {value}"),
-        ))
+        Err((key, format!("must be a non-negative finite number, got {value}")))
     }
 }
 
@@ -168,9 +161,6 @@ pub(crate) fn poisson(value: Real) -> Result<(), (&'static str, String)> {
     if value.is_finite() && value > -1.0 && value < 0.5 {
         Ok(())
     } else {
-        Err((
-            "poisson_ratio",
-            format!("must lie in (-1, 0.5), got {value}"),
-        ))
+        Err(("poisson_ratio", format!("must lie in (-1, 0.5), got {value}")))
     }
 }

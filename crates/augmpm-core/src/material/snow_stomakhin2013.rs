@@ -57,30 +57,15 @@ impl SnowStomakhin2013 {
         positive("youngs_modulus", self.youngs_modulus)?;
         poisson(self.poisson_ratio)?;
         if !(self.critical_compression > 0.0 && self.critical_compression < 1.0) {
-            return Err((
-                "critical_compression",
-                format!("must lie in (0, 1), got {}", self.critical_compression),
-            ));
+            return Err(("critical_compression", format!("must lie in (0, 1), got {}", self.critical_compression)));
         }
         positive("critical_stretch", self.critical_stretch)?;
         if !(self.hardening.is_finite() && self.hardening >= 0.0) {
-            return Err((
-                "hardening",
-                format!(
-                    "must be a non-negative finite number, got {}",
-                    self.hardening
-                ),
-            ));
+            return Err(("hardening", format!("must be a non-negative finite number, got {}", self.hardening)));
         }
         positive("jp_min", self.jp_min)?;
         if !(self.jp_max.is_finite() && self.jp_max > self.jp_min) {
-            return Err((
-                "jp_max",
-                format!(
-                    "must be finite and greater than jp_min, got {}",
-                    self.jp_max
-                ),
-            ));
+            return Err(("jp_max", format!("must be finite and greater than jp_min, got {}", self.jp_max)));
         }
         Ok(())
     }
@@ -150,16 +135,11 @@ mod tests {
         let mut f = Matrix2::identity();
         let mut jp = 1.0;
         let grad_v = Matrix2::new(0.1, 0.0, 0.0, -0.1); // dt = 1: F_trial = diag(1.1, 0.9)
-        <SnowStomakhin2013 as ConstitutiveModel<2>>::update_deformation(
-            &m, &mut f, &mut jp, &grad_v, 1.0,
-        );
+        <SnowStomakhin2013 as ConstitutiveModel<2>>::update_deformation(&m, &mut f, &mut jp, &grad_v, 1.0);
         let (_, s, _) = Dim::<2>::svd(&f);
         let mut s = [s[0], s[1]];
         s.sort_by(|a, b| a.partial_cmp(b).unwrap());
-        assert!(
-            (s[0] - 0.975).abs() < 1e-12 && (s[1] - 1.0075).abs() < 1e-12,
-            "{s:?}"
-        );
+        assert!((s[0] - 0.975).abs() < 1e-12 && (s[1] - 1.0075).abs() < 1e-12, "{s:?}");
         assert!((jp - 0.99 / (1.0075 * 0.975)).abs() < 1e-12);
     }
 

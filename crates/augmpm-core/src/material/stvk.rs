@@ -56,11 +56,7 @@ mod tests {
     /// Uniaxial stretch F = diag(s, 1): E_xx = (s² − 1)/2, S_xx = (2μ + λ)E_xx, S_yy = λE_xx, τ = F S Fᵀ.
     #[test]
     fn uniaxial_stretch_gives_analytic_stress() {
-        let m = StVenantKirchhoff {
-            density: 1000.0,
-            youngs_modulus: 1e6,
-            poisson_ratio: 0.25,
-        };
+        let m = StVenantKirchhoff { density: 1000.0, youngs_modulus: 1e6, poisson_ratio: 0.25 };
         let (mu, lambda) = lame(1e6, 0.25);
         let s = 1.1;
         let p = MaterialPoint::<2> {

@@ -1,0 +1,5 @@
+import sys
+
+from augmpm.cli import main
+
+sys.exit(main())

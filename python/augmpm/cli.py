@@ -1,0 +1,97 @@
+"""The ``augmpm`` command line.
+
+Exit codes: 0 success, 1 a failed run (the simulation went bad), 2 bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from augmpm import _core
+from augmpm.run import run_scene
+from augmpm.scene import load_scene
+
+EXIT_OK, EXIT_FAILED_RUN, EXIT_BAD_INPUT = 0, 1, 2
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # argparse's own exit code is 2 as well
+        self.print_usage(sys.stderr)
+        print(f"augmpm: error: {message}", file=sys.stderr)
+        sys.exit(EXIT_BAD_INPUT)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="augmpm", description="MLS-MPM simulation with accurate wall boundaries.")
+    p.add_argument("--version", action="version", version=f"augmpm {_core.__version__}")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    r = sub.add_parser("run", help="run a scene file and write its outputs")
+    r.add_argument("scene", type=Path, help="scene file (TOML)")
+    r.add_argument("--out", type=Path, help="output directory (default: runs/<scene name>)")
+    r.add_argument("--steps", type=int, help="number of steps (default: the scene's time.steps)")
+    r.add_argument("--method", choices=["naive", "augmented"], default="naive", help="wall boundary method")
+    r.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scene value, e.g. --set time.steps=200 --set bodies[0].material.viscosity=10",
+    )
+    r.add_argument("--gif", action="store_true", help="write animation.gif instead of animation.mp4")
+    r.add_argument("--no-render", action="store_true", help="skip PNG frames and the animation")
+    r.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    return p
+
+
+def _run(args: argparse.Namespace) -> int:
+    if args.steps is not None and args.steps < 0:
+        raise _core.SceneError(f"--steps: must be non-negative, got {args.steps}")
+    scene = load_scene(args.scene, args.overrides)
+    out = args.out or Path("runs") / (scene.name or args.scene.stem)
+    result = run_scene(
+        scene,
+        out,
+        method=args.method,
+        steps=args.steps,
+        progress=not args.no_progress,
+        animation=None if args.no_render else ("gif" if args.gif else "mp4"),
+        render=not args.no_render,
+    )
+    for w in result.warnings:
+        print(f"augmpm: warning: {w}", file=sys.stderr)
+    m = result.final_metrics
+    if result.error:
+        print(f"augmpm: run failed: {result.error}", file=sys.stderr)
+        print(f"augmpm: kept {result.frames} frames in {out}", file=sys.stderr)
+        return EXIT_FAILED_RUN
+    print(
+        f"{result.frames} frames in {out} ({result.wall_time:.1f} s); step {m['step']}, t = {m['time']:.4g} s, "
+        f"kinetic energy {m['kinetic_energy']:.4g}, {m['n_outside']} particles outside the walls, "
+        f"deepest {m['max_penetration']:.3f} h"
+    )
+    return EXIT_OK
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        if args.command == "run":
+            return _run(args)
+    except _core.SceneError as e:
+        print(f"augmpm: bad input: {e}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as e:
+        print(f"augmpm: cannot write output: {e}", file=sys.stderr)
+        return EXIT_FAILED_RUN
+    except KeyboardInterrupt:
+        print("augmpm: interrupted; frames written so far are kept", file=sys.stderr)
+        return 130
+    return EXIT_BAD_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,299 @@
+"""Scene files: TOML in, a validated :class:`Scene` out.
+
+The pydantic models check types, unknown keys and ranges, naming the key of
+every error; geometry (polygon orientation and self-intersection, bodies
+inside the walls) is checked by the Rust core when the simulation is built.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import tomli_w
+import tomllib
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from augmpm._core import SceneError
+
+Vec2 = tuple[float, float]
+PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+FiniteVec2 = tuple[FiniteFloat, FiniteFloat]
+WallCondition = Literal["sticky", "slip", "separate"]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+class Grid(_Strict):
+    """Domain box [0, Lx] × [0, Ly] (m) and cells along x (h = Lx / resolution)."""
+
+    domain: tuple[PositiveFloat, PositiveFloat]
+    resolution: Annotated[int, Field(ge=2, le=65536)]
+
+    @property
+    def cell_size(self) -> float:
+        return self.domain[0] / self.resolution
+
+    @model_validator(mode="after")
+    def _whole_cells(self) -> Grid:
+        ny = self.domain[1] / self.cell_size
+        if abs(ny - round(ny)) > 1e-9 * max(ny, 1.0) or round(ny) < 2:
+            raise ValueError(
+                f"domain height {self.domain[1]} is not a whole number (>= 2) of cells of width {self.cell_size}"
+            )
+        return self
+
+
+class Time(_Strict):
+    """Time step (s) or CFL number, number of steps, steps between output frames."""
+
+    dt: PositiveFloat | None = None
+    cfl: Annotated[float, Field(gt=0, le=1)] | None = None
+    steps: Annotated[int, Field(ge=0)]
+    output_interval: Annotated[int, Field(ge=1)]
+
+    @model_validator(mode="after")
+    def _dt_or_cfl(self) -> Time:
+        if (self.dt is None) == (self.cfl is None):
+            raise ValueError("give exactly one of dt and cfl")
+        return self
+
+
+class PolygonWall(_Strict):
+    """Closed polygon, counter-clockwise, material inside."""
+
+    type: Literal["polygon"]
+    vertices: Annotated[list[FiniteVec2], Field(min_length=3)]
+    condition: WallCondition | None = None
+    velocity: FiniteVec2 = (0.0, 0.0)
+
+
+class CircleWall(_Strict):
+    """Circle; material ``outside`` it (an obstacle) or ``inside`` it (a container)."""
+
+    type: Literal["circle"]
+    center: FiniteVec2
+    radius: PositiveFloat
+    side: Literal["outside", "inside"] = "outside"
+    condition: WallCondition | None = None
+    velocity: FiniteVec2 = (0.0, 0.0)
+
+
+Wall = Annotated[PolygonWall | CircleWall, Field(discriminator="type")]
+
+
+class Fluid(_Strict):
+    """Weakly compressible Newtonian fluid: p = k((ρ/ρ0)^γ − 1) ≥ min_pressure, σ = −pI + μ(∇v + ∇vᵀ)."""
+
+    type: Literal["fluid"]
+    density: PositiveFloat
+    stiffness: PositiveFloat
+    gamma: PositiveFloat = 7.0
+    viscosity: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
+    min_pressure: Annotated[float, Field(le=0, allow_inf_nan=False)] = 0.0
+
+
+class _Solid(_Strict):
+    density: PositiveFloat
+    youngs_modulus: PositiveFloat
+    poisson_ratio: Annotated[float, Field(gt=-1.0, lt=0.5)]
+
+
+class Elastic(_Solid):
+    """Fixed-corotated hyperelastic solid."""
+
+    type: Literal["elastic"]
+
+
+class Stvk(_Solid):
+    """St. Venant–Kirchhoff solid."""
+
+    type: Literal["stvk"]
+
+
+class Snow(_Solid):
+    """Stomakhin et al. 2013 snow: fixed-corotated with clamped singular values and hardening."""
+
+    type: Literal["snow"]
+    critical_compression: Annotated[float, Field(gt=0, lt=1)] = 2.5e-2
+    critical_stretch: PositiveFloat = 7.5e-3
+    hardening: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 10.0
+    jp_min: PositiveFloat = 0.6
+    jp_max: PositiveFloat = 20.0
+
+
+Material = Annotated[Fluid | Elastic | Stvk | Snow, Field(discriminator="type")]
+
+
+class Seeding(_Strict):
+    """Jittered grid: one random point per square of side ``spacing`` (m), or ``per_cell`` per grid cell."""
+
+    spacing: PositiveFloat | None = None
+    per_cell: Annotated[int, Field(ge=1, le=1024)] | None = None
+
+    @model_validator(mode="after")
+    def _one_of(self) -> Seeding:
+        if self.spacing is not None and self.per_cell is not None:
+            raise ValueError("give spacing or per_cell, not both")
+        return self
+
+
+class _Body(_Strict):
+    material: Material
+    velocity: FiniteVec2 = (0.0, 0.0)
+    seeding: Seeding = Field(default_factory=Seeding)
+
+
+class PolygonBody(_Body):
+    """Polygon in a local frame, placed at ``center + scale * vertex``; counter-clockwise."""
+
+    shape: Literal["polygon"]
+    vertices: Annotated[list[FiniteVec2], Field(min_length=3)]
+    scale: PositiveFloat = 1.0
+    center: FiniteVec2 = (0.0, 0.0)
+
+
+class BoxBody(_Body):
+    shape: Literal["box"]
+    min: FiniteVec2
+    max: FiniteVec2
+
+    @model_validator(mode="after")
+    def _ordered(self) -> BoxBody:
+        if not (self.max[0] > self.min[0] and self.max[1] > self.min[1]):
+            raise ValueError("max must exceed min along both axes")
+        return self
+
+
+class CircleBody(_Body):
+    shape: Literal["circle"]
+    center: FiniteVec2
+    radius: PositiveFloat
+
+
+Body = Annotated[PolygonBody | BoxBody | CircleBody, Field(discriminator="shape")]
+
+
+class Scene(_Strict):
+    """A whole scene. Build one in code with keyword arguments or :meth:`from_dict`."""
+
+    name: str = ""
+    seed: Annotated[int, Field(ge=0, lt=2**64)] = 0
+    gravity: FiniteVec2 = (0.0, -9.81)
+    grid: Grid
+    time: Time
+    wall_condition: WallCondition = "sticky"
+    walls: list[Wall] = Field(default_factory=list)
+    bodies: Annotated[list[Body], Field(min_length=1)]
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Scene:
+        """Validates a plain dict (as read from TOML); raises :class:`SceneError` naming the key."""
+        try:
+            return cls.model_validate(data)
+        except ValidationError as e:
+            raise _scene_error(e) from None
+
+    def to_dict(self) -> dict[str, Any]:
+        return self.model_dump(mode="json", exclude_none=True)
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict())
+
+    def to_toml(self) -> str:
+        return tomli_w.dumps(self.to_dict())
+
+    def with_overrides(self, overrides: list[str]) -> Scene:
+        """A copy with ``key=value`` overrides applied (see :func:`apply_override`)."""
+        data = self.to_dict()
+        for item in overrides:
+            apply_override(data, item)
+        return Scene.from_dict(data)
+
+
+def _format_loc(loc: tuple[Any, ...]) -> str:
+    key = ""
+    for part in loc:
+        if isinstance(part, int):
+            key += f"[{part}]"
+        elif part in ("polygon", "circle", "box", "fluid", "elastic", "stvk", "snow") and key:
+            continue  # the tag of a discriminated union, not a key of the file
+        else:
+            key += ("." if key else "") + str(part)
+    return key or "scene"
+
+
+def _scene_error(e: ValidationError) -> SceneError:
+    first = e.errors()[0]
+    key = _format_loc(tuple(first["loc"]))
+    reason = first["msg"]
+    if first["type"] == "extra_forbidden":
+        reason = "unknown key"
+    elif first["type"] == "missing":
+        reason = "required key is missing"
+    more = len(e.errors()) - 1
+    if more:
+        reason += f" (and {more} more error{'s' if more > 1 else ''})"
+    err = SceneError(f"{key}: {reason}")
+    err.key, err.reason = key, reason
+    return err
+
+
+def _parse_value(text: str) -> Any:
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text  # a bare word, e.g. condition=slip
+
+
+def apply_override(data: dict[str, Any], item: str) -> None:
+    """Sets ``a.b[0].c=value`` (or ``a.b.0.c=value``) in ``data``; the value is parsed as TOML."""
+    if "=" not in item:
+        raise _plain_error("--set", f"expected key=value, got {item!r}")
+    path, _, text = item.partition("=")
+    parts = [p for p in path.strip().replace("[", ".").replace("]", "").split(".") if p]
+    if not parts:
+        raise _plain_error("--set", f"empty key in {item!r}")
+    node: Any = data
+    for i, part in enumerate(parts):
+        last = i == len(parts) - 1
+        if isinstance(node, list):
+            if not part.isdigit() or int(part) >= len(node):
+                raise _plain_error(path, f"{part!r} is not an index of a list of {len(node)}")
+            idx: Any = int(part)
+        elif isinstance(node, dict):
+            idx = part
+            if not last and idx not in node:
+                node[idx] = {}
+        else:
+            raise _plain_error(path, f"{'.'.join(parts[:i])} is not a table")
+        if last:
+            node[idx] = _parse_value(text.strip())
+        else:
+            node = node[idx]
+
+
+def _plain_error(key: str, reason: str) -> SceneError:
+    err = SceneError(f"{key}: {reason}")
+    err.key, err.reason = key, reason
+    return err
+
+
+def load_scene(path: str | Path, overrides: list[str] | None = None) -> Scene:
+    """Reads and validates a TOML scene file; raises :class:`SceneError` on bad input."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as e:
+        raise _plain_error(str(path), f"cannot read scene file ({e.strerror})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise _plain_error(str(path), f"not valid TOML: {e}") from None
+    for item in overrides or []:
+        apply_override(data, item)
+    return Scene.from_dict(data)

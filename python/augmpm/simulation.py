@@ -1,0 +1,95 @@
+"""The Python face of a running simulation."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from augmpm import _core
+from augmpm.scene import Scene, load_scene
+
+Method = Literal["naive", "augmented"]
+
+
+class Simulation:
+    """A 2D MLS-MPM simulation of a scene.
+
+    >>> sim = Simulation(load_scene("scenes/dam_break.toml"))
+    >>> sim.step(100)
+    >>> sim.positions.shape  # (N, 2), metres
+    """
+
+    def __init__(self, scene: Scene | str | Path, method: Method = "naive") -> None:
+        if not isinstance(scene, Scene):
+            scene = load_scene(scene)
+        self.scene = scene
+        self.method = method
+        self._sim = _core.Simulation(scene.to_json(), method)
+
+    def step(self, n: int = 1) -> None:
+        """Advances ``n`` time steps; raises :class:`augmpm.SimulationError` if the state goes bad."""
+        if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 0:
+            raise _core.SceneError(f"n: must be a non-negative integer, got {n!r}")
+        self._sim.step(int(n))
+
+    @property
+    def positions(self) -> np.ndarray:
+        """Particle positions (m), shape (N, 2)."""
+        return self._sim.positions
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """Particle velocities (m/s), shape (N, 2)."""
+        return self._sim.velocities
+
+    @property
+    def body(self) -> np.ndarray:
+        """Body index of each particle, shape (N,)."""
+        return self._sim.body
+
+    @property
+    def masses(self) -> np.ndarray:
+        """Particle masses (kg per metre of depth in 2D), shape (N,)."""
+        return self._sim.masses
+
+    @property
+    def num_particles(self) -> int:
+        return self._sim.num_particles
+
+    @property
+    def time(self) -> float:
+        """Simulated time (s)."""
+        return self._sim.time
+
+    @property
+    def steps_done(self) -> int:
+        return self._sim.steps_done
+
+    @property
+    def dt(self) -> float:
+        """Time step (s)."""
+        return self._sim.dt
+
+    @property
+    def stable_dt(self) -> float:
+        """The materials' stable time step bound (s) on this grid."""
+        return self._sim.stable_dt
+
+    @property
+    def cell_size(self) -> float:
+        """Grid cell width h (m)."""
+        return self._sim.cell_size
+
+    @property
+    def warnings(self) -> list[str]:
+        return self._sim.warnings
+
+    def wall_distance(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance (m) of points (M, 2) to the walls, positive outside the material region."""
+        return self._sim.wall_distance(np.ascontiguousarray(points, dtype=np.float64))
+
+    def metrics(self) -> dict[str, float]:
+        """``step, time, kinetic_energy, n_outside, max_penetration`` (the last in cell widths)."""
+        return self._sim.metrics()
