@@ -77,7 +77,10 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    try:
+        args = _parser().parse_args(argv)
+    except SystemExit as e:  # --help, --version, or a usage error (code 2)
+        return int(e.code or 0)
     try:
         if args.command == "run":
             return _run(args)

@@ -37,7 +37,7 @@ class RunResult:
 
 def run_scene(
     scene: Scene,
-    out: Path,
+    out: str | Path,
     method: Method = "naive",
     steps: int | None = None,
     progress: bool = True,
@@ -50,6 +50,7 @@ def run_scene(
     stops the run; every frame written before it is kept and the result's
     ``error`` says at which step and why.
     """
+    out = Path(out)
     sim = Simulation(scene, method)
     total = scene.time.steps if steps is None else steps
     interval = scene.time.output_interval

@@ -6,6 +6,9 @@
 //! [`transfer`] (the stages of a step), [`solver`] (model, state, step) and
 //! [`scene`] (building a simulation from a scene description).
 
+// Index loops over the dimension `D` read like the formulas they implement.
+#![allow(clippy::needless_range_loop)]
+
 pub mod boundary;
 pub mod geometry;
 pub mod grid;

@@ -341,7 +341,9 @@ fn seed_body(
             return Err(SceneError::new(format!("{key}.seeding"), "give spacing or per_cell, not both"))
         }
     };
-    let (area, lo, hi, inside): (Real, Point, Point, Box<dyn Fn(&Point) -> bool>) = match &body.shape {
+    // Area (m²), bounding box and inside test of the body.
+    type ShapeInfo = (Real, Point, Point, Box<dyn Fn(&Point) -> bool>);
+    let (area, lo, hi, inside): ShapeInfo = match &body.shape {
         BodyShape::Polygon { vertices, scale, center } => {
             if !(scale.is_finite() && *scale > 0.0) {
                 return Err(SceneError::new(format!("{key}.scale"), format!("must be positive, got {scale}")));

@@ -28,7 +28,7 @@ where
     Dim<D>: DimOps<D>,
 {
     fn needs_grid_density(&self) -> bool {
-        self.materials.iter().any(|m| ConstitutiveModel::<D>::needs_grid_density(m))
+        self.materials.iter().any(ConstitutiveModel::<D>::needs_grid_density)
     }
 
     /// The smallest stable time step (s) of the model's materials on its grid.

@@ -1,0 +1,43 @@
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import pytest
+import tomli_w
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENES = ROOT / "scenes"
+
+_SMALL = {
+    "name": "small",
+    "seed": 1,
+    "gravity": [0.0, -9.81],
+    "grid": {"domain": [1.0, 1.0], "resolution": 16},
+    "time": {"dt": 1e-3, "steps": 20, "output_interval": 10},
+    "walls": [{"type": "polygon", "vertices": [[0.05, 0.3], [0.95, 0.05], [0.95, 0.95], [0.05, 0.95]]}],
+    "bodies": [
+        {
+            "shape": "box",
+            "min": [0.3, 0.5],
+            "max": [0.6, 0.8],
+            "material": {"type": "elastic", "density": 1000.0, "youngs_modulus": 1e5, "poisson_ratio": 0.3},
+        }
+    ],
+}
+
+
+@pytest.fixture
+def small_scene() -> dict:
+    """A valid scene, small enough to build and step in milliseconds."""
+    return copy.deepcopy(_SMALL)
+
+
+@pytest.fixture
+def write_scene(tmp_path):
+    def write(data: dict, name: str = "scene.toml") -> Path:
+        path = tmp_path / name
+        path.write_text(tomli_w.dumps(data), encoding="utf-8")
+        return path
+
+    return write

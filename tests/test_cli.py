@@ -1,0 +1,73 @@
+"""`augmpm run` writes every promised output file, and keeps them when a run fails."""
+
+from __future__ import annotations
+
+import csv
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+
+import numpy as np
+
+import augmpm
+from augmpm.cli import main
+
+from .conftest import SCENES
+
+
+def test_short_run_of_shipped_scene_writes_every_output(tmp_path):
+    out = tmp_path / "run"
+    code = main(
+        ["run", str(SCENES / "dam_break.toml"), "--out", str(out), "--steps", "80", "--no-progress",
+         "--set", "time.output_interval=40"]
+    )  # fmt: skip
+    assert code == 0
+    # The resolved scene loads again and is the scene that ran.
+    resolved = augmpm.load_scene(out / "scene.toml")
+    assert resolved.time.output_interval == 40
+    with open(out / "metrics.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert list(rows[0]) == ["step", "time", "kinetic_energy", "n_outside", "max_penetration"]
+    assert [int(r["step"]) for r in rows] == [0, 40, 80]
+    assert float(rows[-1]["kinetic_energy"]) > 0.0
+    for i in range(3):
+        frame = np.load(out / "particles" / f"frame_{i:05d}.npz")
+        n = len(frame["body"])
+        assert frame["x"].shape == (n, 2) and frame["v"].shape == (n, 2)
+        assert (out / "frames" / f"frame_{i:05d}.png").stat().st_size > 1000
+        vtp = ET.parse(out / "vtk" / f"frame_{i:05d}.vtp").getroot()
+        assert vtp.find("PolyData/Piece").get("NumberOfPoints") == str(n)
+    pvd = ET.parse(out / "particles.pvd").getroot()
+    assert [d.get("file") for d in pvd.iter("DataSet")] == [f"vtk/frame_{i:05d}.vtp" for i in range(3)]
+    assert (out / "animation.mp4").stat().st_size > 1000
+
+
+def test_gif_animation(small_scene, write_scene, tmp_path):
+    out = tmp_path / "gif"
+    assert main(["run", str(write_scene(small_scene)), "--out", str(out), "--gif", "--no-progress"]) == 0
+    assert (out / "animation.gif").stat().st_size > 100
+    assert not (out / "animation.mp4").exists()
+
+
+def test_failed_run_exits_1_and_keeps_frames(small_scene, write_scene, tmp_path, capsys):
+    small_scene["time"].update(dt=0.2, steps=400, output_interval=1)
+    small_scene["bodies"][0]["material"]["youngs_modulus"] = 1e9
+    out = tmp_path / "bad"
+    assert main(["run", str(write_scene(small_scene)), "--out", str(out), "--no-progress", "--no-render"]) == 1
+    err = capsys.readouterr().err
+    assert "run failed: step" in err
+    frames = sorted((out / "particles").glob("*.npz"))
+    with open(out / "metrics.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(frames) == len(rows) >= 1
+    assert all(np.isfinite(np.load(f)["x"]).all() for f in frames)
+
+
+def test_console_script_is_installed(small_scene, write_scene, tmp_path):
+    out = tmp_path / "cli"
+    proc = subprocess.run(
+        [sys.executable, "-m", "augmpm", "run", str(write_scene(small_scene)), "--out", str(out), "--no-render"],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "frames in" in proc.stdout

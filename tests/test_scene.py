@@ -1,0 +1,120 @@
+"""Scene files: every class of bad input names its key, raises SceneError and exits with code 2."""
+
+from __future__ import annotations
+
+import pytest
+
+import augmpm
+from augmpm.cli import main
+
+from .conftest import SCENES
+
+
+def _mutate(data: dict, path: str, value) -> dict:
+    node = data
+    parts = path.split(".")
+    for p in parts[:-1]:
+        node = node[int(p)] if isinstance(node, list) else node[p]
+    last = parts[-1]
+    if isinstance(node, list):
+        node[int(last)] = value
+    else:
+        node[last] = value
+    return data
+
+
+BAD = [
+    ("unknown key", "grid.resolutoin", 16, "grid.resolutoin", "unknown key"),
+    ("wrong type", "time.steps", "many", "time.steps", "integer"),
+    ("negative density", "bodies.0.material.density", -1.0, "bodies[0].material.density", "greater than 0"),
+    ("poisson ratio 0.5", "bodies.0.material.poisson_ratio", 0.5, "bodies[0].material.poisson_ratio", "less than 0.5"),
+    ("unknown material", "bodies.0.material.type", "jelly", "bodies[0].material", "type"),
+    ("NaN gravity", "gravity", [float("nan"), 0.0], "gravity[0]", "finite"),
+    (
+        "self-intersecting wall",
+        "walls.0.vertices",
+        [[0.1, 0.1], [0.9, 0.9], [0.9, 0.1], [0.1, 0.9]],
+        "walls[0].vertices",
+        "self-intersecting",
+    ),
+    (
+        "clockwise wall",
+        "walls.0.vertices",
+        [[0.05, 0.95], [0.95, 0.95], [0.95, 0.05], [0.05, 0.3]],
+        "walls[0].vertices",
+        "clockwise",
+    ),
+    ("body outside the walls", "bodies.0.min", [0.02, 0.02], "bodies[0]", "outside the walls"),
+    ("body outside the domain", "bodies.0.max", [1.2, 0.8], "bodies[0]", "outside the walls"),
+    ("both dt and cfl", "time.cfl", 0.5, "time", "exactly one of dt and cfl"),
+    ("grid height not whole cells", "grid.domain", [1.0, 0.51], "grid", "whole number"),
+]
+
+
+@pytest.mark.parametrize(("what", "path", "value", "key", "reason"), BAD, ids=[b[0] for b in BAD])
+def test_bad_scene_is_named(small_scene, what, path, value, key, reason):
+    data = _mutate(small_scene, path, value)
+    with pytest.raises(augmpm.SceneError) as err:
+        augmpm.Simulation(augmpm.Scene.from_dict(data))
+    assert err.value.key == key, str(err.value)
+    assert reason in str(err.value)
+
+
+@pytest.mark.parametrize(("what", "path", "value", "key", "reason"), BAD, ids=[b[0] for b in BAD])
+def test_bad_scene_exits_2(small_scene, write_scene, tmp_path, capsys, what, path, value, key, reason):
+    scene = write_scene(_mutate(small_scene, path, value))
+    out = tmp_path / "out"
+    assert main(["run", str(scene), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert key in err and reason in err
+    assert not (out / "metrics.csv").exists()
+
+
+def test_unreadable_inputs_exit_2(tmp_path, capsys, write_scene, small_scene):
+    assert main(["run", str(tmp_path / "missing.toml")]) == 2
+    assert "cannot read scene file" in capsys.readouterr().err
+    broken = tmp_path / "broken.toml"
+    broken.write_text("grid = [", encoding="utf-8")
+    assert main(["run", str(broken)]) == 2
+    assert "not valid TOML" in capsys.readouterr().err
+    scene = write_scene(small_scene)
+    assert main(["run", str(scene), "--set", "bodies[3].velocity=[1,0]"]) == 2
+    assert "not an index" in capsys.readouterr().err
+    assert main(["run", str(scene), "--method", "magic"]) == 2
+
+
+def test_overrides_reach_the_scene(small_scene, write_scene):
+    path = write_scene(small_scene)
+    scene = augmpm.load_scene(path, ["time.steps=7", "bodies.0.material.youngs_modulus=2e5", "wall_condition=slip"])
+    assert scene.time.steps == 7
+    assert scene.bodies[0].material.youngs_modulus == 2e5
+    assert scene.wall_condition == "slip"
+
+
+def test_dt_above_stable_bound_warns(small_scene):
+    small_scene["time"]["dt"] = 0.05
+    sim = augmpm.Simulation(augmpm.Scene.from_dict(small_scene))
+    assert sim.dt > sim.stable_dt
+    assert any("exceeds the stable bound" in w for w in sim.warnings)
+
+
+def test_cfl_sets_dt_from_the_stable_bound(small_scene):
+    del small_scene["time"]["dt"]
+    small_scene["time"]["cfl"] = 0.4
+    sim = augmpm.Simulation(augmpm.Scene.from_dict(small_scene))
+    assert sim.dt == pytest.approx(0.4 * sim.stable_dt, rel=1e-12)
+    assert sim.warnings == []
+
+
+@pytest.mark.parametrize("path", sorted(SCENES.rglob("*.toml")), ids=lambda p: p.stem)
+def test_shipped_scenes_build(path):
+    sim = augmpm.Simulation(augmpm.load_scene(path))
+    assert sim.num_particles > 0
+    assert sim.metrics()["n_outside"] == 0
+    assert sim.warnings == []
+
+
+def test_resolved_scene_round_trips(small_scene, tmp_path):
+    scene = augmpm.Scene.from_dict(small_scene)
+    again = augmpm.Scene.from_dict(__import__("tomllib").loads(scene.to_toml()))
+    assert again == scene
