@@ -22,7 +22,15 @@ from augmpm.scene import Scene
 from augmpm.simulation import Method, Simulation
 from augmpm.vtk import write_pvd, write_vtp
 
-METRIC_COLUMNS = ["step", "time", "kinetic_energy", "n_outside", "max_penetration"]
+METRIC_COLUMNS = [
+    "step",
+    "time",
+    "kinetic_energy",
+    "n_outside",
+    "max_penetration",
+    "ill_conditioned",
+    "low_mass_nodes",
+]
 
 
 @dataclass

@@ -178,6 +178,13 @@ class CircleBody(_Body):
 Body = Annotated[PolygonBody | BoxBody | CircleBody, Field(discriminator="shape")]
 
 
+class Augmented(_Strict):
+    """Augmented grid: exclusion distance δ (Fig. 3) and largest boundary-point spacing, in cell widths."""
+
+    delta: Annotated[float, Field(ge=0, lt=1.5)] = 0.25
+    spacing: Annotated[float, Field(gt=0.05, le=1.0)] = 1.0
+
+
 class Scene(_Strict):
     """A whole scene. Build one in code with keyword arguments or :meth:`from_dict`."""
 
@@ -189,6 +196,7 @@ class Scene(_Strict):
     wall_condition: WallCondition = "sticky"
     walls: list[Wall] = Field(default_factory=list)
     bodies: Annotated[list[Body], Field(min_length=1)]
+    augmented: Augmented = Field(default_factory=Augmented)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Scene:

@@ -86,6 +86,11 @@ class Simulation:
     def warnings(self) -> list[str]:
         return self._sim.warnings
 
+    @property
+    def boundary_points(self) -> np.ndarray:
+        """Boundary grid points (m), shape (B, 2); empty for the naive method."""
+        return self._sim.boundary_points
+
     def wall_distance(self, points: np.ndarray) -> np.ndarray:
         """Signed distance (m) of points (M, 2) to the walls, positive outside the material region."""
         return self._sim.wall_distance(np.ascontiguousarray(points, dtype=np.float64))

@@ -3,6 +3,7 @@
 //! Distances are signed and positive on the wall side (outside the material);
 //! normals point from the material into the wall.
 
+use crate::augmented::BoundaryPoint;
 use crate::math::{Real, Vector};
 use nalgebra::Vector2;
 
@@ -194,6 +195,55 @@ impl Walls2 {
     }
 }
 
+impl Walls2 {
+    /// Boundary grid points at spacing ≤ `h` (m) along every wall: polygon vertices (two
+    /// normals) plus the points that split each edge into ⌈len/h⌉ equal parts, and
+    /// ⌈2πr/h⌉ points around each circle. Only points on the boundary of the material
+    /// region are kept (e.g. the domain box is dropped where a polygon lies inside it).
+    pub fn boundary_points(&self, h: Real) -> Vec<BoundaryPoint<2>> {
+        let mut out = Vec::new();
+        let polygons = self
+            .walls
+            .iter()
+            .enumerate()
+            .filter_map(|(i, w)| match w {
+                WallShape::Polygon(p) => Some((i, p)),
+                WallShape::Circle(..) => None,
+            })
+            .chain(std::iter::once((self.box_index(), &self.domain_box)));
+        for (wall, poly) in polygons {
+            let n = poly.vertices.len();
+            let normal = |i: usize| {
+                let e = poly.vertices[(i + 1) % n] - poly.vertices[i];
+                Point::new(e.y, -e.x).normalize()
+            };
+            for i in 0..n {
+                let (a, b) = (poly.vertices[i], poly.vertices[(i + 1) % n]);
+                let (before, after) = (normal((i + n - 1) % n), normal(i));
+                out.push(BoundaryPoint::new(a, before, after, wall));
+                let parts = ((b - a).norm() / h).ceil().max(1.0) as usize;
+                for k in 1..parts {
+                    out.push(BoundaryPoint::new(a + (b - a) * (k as Real / parts as Real), after, after, wall));
+                }
+            }
+        }
+        for (wall, w) in self.walls.iter().enumerate() {
+            if let WallShape::Circle(c, side) = w {
+                let parts = (2.0 * std::f64::consts::PI * c.radius / h).ceil().max(8.0) as usize;
+                for k in 0..parts {
+                    let t = 2.0 * std::f64::consts::PI * k as Real / parts as Real;
+                    let radial = Point::new(t.cos(), t.sin());
+                    let n = if *side == Side::Outside { -radial } else { radial };
+                    out.push(BoundaryPoint::new(c.center + radial * c.radius, n, n, wall));
+                }
+            }
+        }
+        let tolerance = 1e-9 * h;
+        out.retain(|p| self.distance(&p.x).distance.abs() <= tolerance);
+        out
+    }
+}
+
 impl Region<2> for Walls2 {
     fn distance(&self, x: &Vector<2>) -> WallDistance<2> {
         // Intersection of constraints: the largest signed distance wins.
@@ -246,6 +296,31 @@ mod tests {
         assert!((d + 0.1).abs() < 1e-12 && (n - Point::new(1.0, 0.0)).norm() < 1e-12);
         let (d, n) = s.signed_distance(&Point::new(1.0, 0.3));
         assert!(d.abs() < 1e-15 && (n - Point::new(1.0, 0.0)).norm() < 1e-15);
+    }
+
+    /// The paper's container (shared/spec/paper-scenes.md): 4 vertices plus ⌈len/h⌉ − 1 points per
+    /// edge, none of the domain box (it lies outside the polygon), each at spacing ≤ h.
+    #[test]
+    fn boundary_points_of_the_paper_container() {
+        let h = 1.0 / 80.0;
+        let poly = Polygon::new(vec![
+            Point::new(0.047, 0.5),
+            Point::new(0.953, 0.047),
+            Point::new(0.953, 0.953),
+            Point::new(0.047, 0.953),
+        ]);
+        let expected: usize = poly.edges().map(|(a, b)| ((b - a).norm() / h).ceil() as usize).sum();
+        let walls = Walls2::new(vec![WallShape::Polygon(poly)], Point::new(1.0, 1.0));
+        let pts = walls.boundary_points(h);
+        assert_eq!(pts.len(), expected);
+        assert!(pts.iter().all(|p| p.wall == 0));
+        let corners = pts.iter().filter(|p| p.normals[0] != p.normals[1]).count();
+        assert_eq!(corners, 4);
+        for w in pts.windows(2) {
+            if w[0].wall == w[1].wall {
+                assert!((w[1].x - w[0].x).norm() <= h * (1.0 + 1e-12));
+            }
+        }
     }
 
     #[test]

@@ -57,6 +57,20 @@ impl<const D: usize> GridLayout<D> {
         Some(idx)
     }
 
+    /// Linear index of the node at integer coordinate `c`, if it is in the grid.
+    #[inline]
+    pub fn node_index(&self, c: &[i64; D]) -> Option<usize> {
+        let mut idx = 0;
+        for k in 0..D {
+            let i = c[k] + GHOST;
+            if i < 0 || i as usize >= self.dims[k] {
+                return None;
+            }
+            idx += i as usize * self.strides[k];
+        }
+        Some(idx)
+    }
+
     /// Linear offset of a stencil offset (each component 0..3) from its origin.
     #[inline]
     pub fn offset(&self, o: &[usize; D]) -> usize {
@@ -85,17 +99,20 @@ impl<const D: usize> GridLayout<D> {
 pub struct GridState<const D: usize> {
     /// Node mass (kg in 3D, kg/m in 2D).
     pub mass: Vec<Real>,
+    /// Σ |φ| m_p: equals `mass` unless some MLS shape functions were negative.
+    pub abs_mass: Vec<Real>,
     /// Momentum after particle→grid, velocity (m/s) after the grid update.
     pub momentum: Vec<Vector<D>>,
 }
 
 impl<const D: usize> GridState<D> {
     pub fn new(n: usize) -> Self {
-        Self { mass: vec![0.0; n], momentum: vec![Vector::<D>::zeros(); n] }
+        Self { mass: vec![0.0; n], abs_mass: vec![0.0; n], momentum: vec![Vector::<D>::zeros(); n] }
     }
 
     pub fn clear(&mut self) {
         self.mass.fill(0.0);
+        self.abs_mass.fill(0.0);
         self.momentum.fill(Vector::<D>::zeros());
     }
 }

@@ -50,6 +50,71 @@ impl<const D: usize> Stencil<D> {
     }
 }
 
+/// Quadratic B-spline N(r) of a distance `r` in cell widths (support |r| < 1.5).
+#[inline]
+pub fn bspline(r: Real) -> Real {
+    let r = r.abs();
+    if r < 0.5 {
+        0.75 - r * r
+    } else if r < 1.5 {
+        0.5 * (1.5 - r) * (1.5 - r)
+    } else {
+        0.0
+    }
+}
+
+/// Tensor-product weight w(d) = Π N(d_k / h) of a point at offset `d` (m).
+#[inline]
+pub fn weight<const D: usize>(d: &Vector<D>, inv_h: Real) -> Real {
+    d.iter().map(|&x| bspline(x * inv_h)).product()
+}
+
+/// How a particle's MLS system was solved.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum MlsKind {
+    /// Whole regular stencil and no boundary point: the closed form.
+    Regular,
+    /// General inverse of eq. (5).
+    General,
+    /// The moment matrix was near-singular (points almost collinear): regularized.
+    Regularized,
+    /// No grid point at all in the particle's support (it is deep inside a wall).
+    Isolated,
+}
+
+/// Weighted moments Σw, Σw d, Σw d dᵀ of a particle's points (the blocks of eq. (5)).
+#[derive(Clone, Copy, Debug)]
+pub struct Moments<const D: usize> {
+    pub a: Real,
+    pub b: Vector<D>,
+    pub c: Matrix<D>,
+}
+
+impl<const D: usize> Moments<D> {
+    pub fn new() -> Self {
+        Self { a: 0.0, b: Vector::<D>::zeros(), c: Matrix::<D>::zeros() }
+    }
+
+    #[inline]
+    pub fn add(&mut self, w: Real, d: &Vector<D>) {
+        self.a += w;
+        self.b += d * w;
+        self.c += d * d.transpose() * w;
+    }
+}
+
+impl<const D: usize> Default for Moments<D> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Below this ratio of the smallest eigenvalue of the centred second moment
+/// to `Σw·h²` (1/4 on a whole regular stencil) the MLS system counts as
+/// ill-conditioned: its points are almost collinear.
+pub const ILL_CONDITIONED: Real = 1e-3;
+
 /// Inverse of the MLS moment matrix `M_p` (eq. (5)) with the linear basis
 /// `P(x) = [1, x]`, stored in block form
 /// `M_p⁻¹ = [[alpha, betaᵀ], [beta, gamma]]` so that it is generic over `D`.
@@ -65,6 +130,30 @@ impl<const D: usize> MlsInverse<D> {
     /// `M_p⁻¹ = diag(1, 4/h² I)` and MLS-MPM reduces to APIC.
     pub fn regular(h: Real) -> Self {
         Self { alpha: 1.0, beta: Vector::<D>::zeros(), gamma: Matrix::<D>::identity() * (4.0 / (h * h)) }
+    }
+
+    /// Inverse of `M = [[a, bᵀ], [b, C]]` by the Schur complement `S = C − b bᵀ/a`:
+    /// `Γ = S⁻¹`, `β = −Γ b/a`, `α = 1/a + bᵀΓb/a²`. A near-singular S (points almost
+    /// collinear, e.g. a particle beyond a wall that sees only boundary points) is
+    /// regularized by adding `ILL_CONDITIONED·a·h²` to its spectrum, which damps the
+    /// gradient along the missing direction; with no point at all (`a = 0`) the
+    /// particle is isolated and every shape function is zero.
+    pub fn from_moments<Ops: crate::math::DimOps<D>>(m: &Moments<D>, h: Real) -> (Self, MlsKind) {
+        if m.a <= 1e-12 {
+            return (Self { alpha: 0.0, beta: Vector::<D>::zeros(), gamma: Matrix::<D>::zeros() }, MlsKind::Isolated);
+        }
+        let mean = m.b / m.a;
+        let mut s = m.c - m.b * mean.transpose();
+        let floor = ILL_CONDITIONED * m.a * h * h;
+        let mut kind = MlsKind::General;
+        if Ops::min_sym_eigenvalue(&s) < floor {
+            s += Matrix::<D>::identity() * floor;
+            kind = MlsKind::Regularized;
+        }
+        let gamma = Ops::inverse(&s).unwrap_or_else(|| Matrix::<D>::identity() / floor);
+        let beta = -(gamma * mean);
+        let alpha = 1.0 / m.a + mean.dot(&(gamma * mean));
+        (Self { alpha, beta, gamma }, kind)
     }
 
     /// MLS shape function of a node with weight `w` at `dpos = x_i − x_p`:
@@ -128,6 +217,39 @@ mod tests {
             let expect = nalgebra::Matrix2::identity() * (h * h / 4.0);
             assert!((m - expect).norm() < 1e-12 * h * h, "{m}");
         }
+    }
+
+    /// On a whole regular stencil the general inverse of eq. (5) equals the closed form.
+    #[test]
+    fn general_inverse_matches_closed_form_on_regular_stencil() {
+        let h = 0.0125;
+        for x in positions() {
+            let s = Stencil::<2>::new(&(x * h), 1.0 / h);
+            let mut m = Moments::new();
+            s.for_each(h, |_, w, d| m.add(w, &d));
+            let (inv, kind) = MlsInverse::from_moments::<crate::math::Dim<2>>(&m, h);
+            let closed = MlsInverse::<2>::regular(h);
+            assert_eq!(kind, MlsKind::General);
+            assert!((inv.alpha - 1.0).abs() < 1e-12);
+            assert!(inv.beta.norm() * h < 1e-10);
+            assert!((inv.gamma - closed.gamma).norm() / closed.gamma.norm() < 1e-10);
+        }
+    }
+
+    /// Points on one line leave the moment matrix singular across it: regularized, not a panic.
+    #[test]
+    fn collinear_points_are_regularized() {
+        let h = 0.1;
+        let mut m = Moments::<2>::new();
+        for k in -1..=1 {
+            let d = Vector2::new(k as Real * h, 0.5 * h);
+            m.add(weight(&d, 1.0 / h), &d);
+        }
+        let (inv, kind) = MlsInverse::from_moments::<crate::math::Dim<2>>(&m, h);
+        assert_eq!(kind, MlsKind::Regularized);
+        assert!(inv.gamma.iter().all(|v| v.is_finite()));
+        let (_, kind) = MlsInverse::from_moments::<crate::math::Dim<2>>(&Moments::new(), h);
+        assert_eq!(kind, MlsKind::Isolated);
     }
 
     /// The regular closed form gives phi = w and g = 4/h²·w·(x_i − x_p).

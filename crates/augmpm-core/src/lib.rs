@@ -9,6 +9,7 @@
 // Index loops over the dimension `D` read like the formulas they implement.
 #![allow(clippy::needless_range_loop)]
 
+pub mod augmented;
 pub mod boundary;
 pub mod geometry;
 pub mod grid;

@@ -24,6 +24,10 @@ pub trait DimOps<const D: usize> {
     fn svd(m: &Matrix<D>) -> (Matrix<D>, Vector<D>, Matrix<D>);
     /// Determinant of `m`.
     fn det(m: &Matrix<D>) -> Real;
+    /// Smallest eigenvalue of the symmetric matrix `m`.
+    fn min_sym_eigenvalue(m: &Matrix<D>) -> Real;
+    /// Inverse of `m`, if it is invertible.
+    fn inverse(m: &Matrix<D>) -> Option<Matrix<D>>;
 }
 
 macro_rules! impl_dim_ops {
@@ -47,6 +51,13 @@ macro_rules! impl_dim_ops {
             #[inline]
             fn det(m: &Matrix<$d>) -> Real {
                 m.determinant()
+            }
+            fn min_sym_eigenvalue(m: &Matrix<$d>) -> Real {
+                m.symmetric_eigenvalues().min()
+            }
+            #[inline]
+            fn inverse(m: &Matrix<$d>) -> Option<Matrix<$d>> {
+                m.try_inverse()
             }
         }
     };

@@ -1,13 +1,14 @@
 //! Scene description (the resolved form of a scene file) and how a 2D
 //! simulation is built from it: validation, walls, particle seeding.
 
+use crate::augmented::AugmentedGrid;
 use crate::boundary::{Method, NaiveBoundary, WallCondition, WallMotion};
 use crate::geometry::{Circle, Point, Polygon, Region, Side, WallShape, Walls2};
 use crate::grid::GridLayout;
 use crate::material::Material;
 use crate::math::Real;
 use crate::particles::Particles;
-use crate::solver::{Model, Simulation};
+use crate::solver::{Boundary, Model, Simulation};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use serde::{Deserialize, Serialize};
@@ -152,6 +153,35 @@ pub struct Scene {
     #[serde(default)]
     pub walls: Vec<WallSpec>,
     pub bodies: Vec<BodySpec>,
+    #[serde(default)]
+    pub augmented: AugmentedSpec,
+}
+
+/// Settings of the augmented grid (`method = "augmented"`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AugmentedSpec {
+    /// Exclusion distance δ in cell widths: regular nodes closer than δ·h to a wall (or
+    /// outside the material) are dropped from the interpolation (Fig. 3 of the paper).
+    #[serde(default = "default_delta")]
+    pub delta: Real,
+    /// Largest spacing of the boundary points along a wall, in cell widths.
+    #[serde(default = "default_spacing")]
+    pub spacing: Real,
+}
+
+fn default_spacing() -> Real {
+    1.0
+}
+
+fn default_delta() -> Real {
+    0.25
+}
+
+impl Default for AugmentedSpec {
+    fn default() -> Self {
+        Self { delta: default_delta(), spacing: default_spacing() }
+    }
 }
 
 fn point(p: &[Real; 2]) -> Point {
@@ -283,9 +313,6 @@ impl Scene {
 
     /// Validates the scene and builds the simulation. Returns warnings beside it.
     pub fn build(&self, method: Method) -> Result<(Simulation<2>, Vec<String>), SceneError> {
-        if method == Method::Augmented {
-            return Err(SceneError::new("method", "the augmented grid is not implemented yet; use method = \"naive\""));
-        }
         finite("gravity", &self.gravity)?;
         let layout = self.layout()?;
         let h = layout.h;
@@ -311,7 +338,27 @@ impl Scene {
                 ));
             }
         }
-        let boundary = NaiveBoundary::new(&layout, &region, motions);
+        let boundary = match method {
+            Method::Naive => Boundary::Naive(NaiveBoundary::new(&layout, &region, motions)),
+            Method::Augmented => {
+                let delta = self.augmented.delta;
+                if !(delta.is_finite() && (0.0..1.5).contains(&delta)) {
+                    return Err(SceneError::new(
+                        "augmented.delta",
+                        format!("must lie in [0, 1.5) cell widths, got {delta}"),
+                    ));
+                }
+                let spacing = self.augmented.spacing;
+                if !(spacing.is_finite() && spacing > 0.05 && spacing <= 1.0) {
+                    return Err(SceneError::new(
+                        "augmented.spacing",
+                        format!("must lie in (0.05, 1] cell widths, got {spacing}"),
+                    ));
+                }
+                let points = region.boundary_points(spacing * h);
+                Boundary::Augmented(AugmentedGrid::new(&layout, &region, points, motions, delta * h))
+            }
+        };
         let mut model =
             Model { layout, materials, gravity: point(&self.gravity), region: Box::new(region), boundary, dt: 0.0 };
         let (dt, warning) = self.dt(model.stable_dt())?;

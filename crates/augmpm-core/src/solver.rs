@@ -1,14 +1,34 @@
 //! The model (what does not change during a run), the simulation state and
 //! the time step, which only calls the stages of [`crate::transfer`] in order.
 
+use crate::augmented::AugmentedGrid;
 use crate::boundary::NaiveBoundary;
 use crate::geometry::Region;
 use crate::grid::{GridLayout, GridState};
-use crate::kernel::MlsInverse;
+use crate::kernel::{MlsInverse, MlsKind};
 use crate::material::{ConstitutiveModel, Material};
 use crate::math::{Dim, DimOps, Matrix, Real, Vector};
 use crate::particles::Particles;
-use crate::transfer::{self, OutOfGrid};
+use crate::transfer::{self, AugmentedStencil, Neighbourhood, OutOfGrid, RegularStencil};
+use rayon::prelude::*;
+
+/// How the walls act on the grid: one of the two methods of [`crate::boundary::Method`].
+pub enum Boundary<const D: usize> {
+    /// Grid nodes on the wall side are projected after the grid update.
+    Naive(NaiveBoundary<D>),
+    /// Boundary points join the grid; particles solve their own MLS systems.
+    Augmented(AugmentedGrid<D>),
+}
+
+impl<const D: usize> Boundary<D> {
+    /// Grid points: regular nodes, plus boundary points on an augmented grid.
+    fn num_points(&self, layout: &GridLayout<D>) -> usize {
+        match self {
+            Boundary::Naive(_) => layout.num_nodes(),
+            Boundary::Augmented(g) => layout.num_nodes() + g.points.len(),
+        }
+    }
+}
 
 /// Everything fixed during a run: grid, materials, gravity, walls.
 pub struct Model<const D: usize> {
@@ -18,7 +38,7 @@ pub struct Model<const D: usize> {
     pub gravity: Vector<D>,
     /// The material region and its walls.
     pub region: Box<dyn Region<D>>,
-    pub boundary: NaiveBoundary<D>,
+    pub boundary: Boundary<D>,
     /// Time step (s).
     pub dt: Real,
 }
@@ -54,6 +74,9 @@ struct Scratch<const D: usize> {
     grid: GridState<D>,
     density: Vec<Real>,
     stress: Vec<Matrix<D>>,
+    /// Per-particle MLS inverse and how it was obtained (augmented grid only).
+    minv: Vec<MlsInverse<D>>,
+    kind: Vec<MlsKind>,
 }
 
 /// Diagnostics of the current state.
@@ -68,6 +91,10 @@ pub struct Metrics {
     pub n_outside: usize,
     /// Deepest particle beyond a wall, in cell widths h (0 when none is outside).
     pub max_penetration: Real,
+    /// Particle-steps so far whose MLS moment matrix was near-singular or empty (augmented grid).
+    pub ill_conditioned: u64,
+    /// Node-steps so far whose MLS mass was below [`transfer::LOW_MASS_FRACTION`] of its absolute mass.
+    pub low_mass_nodes: u64,
 }
 
 /// A running simulation: the model, the particles and the clock.
@@ -78,6 +105,8 @@ pub struct Simulation<const D: usize> {
     pub step: u64,
     /// Time (s).
     pub time: Real,
+    ill_conditioned: u64,
+    low_mass_nodes: u64,
     scratch: Scratch<D>,
 }
 
@@ -88,32 +117,57 @@ where
     pub fn new(model: Model<D>, particles: Particles<D>) -> Self {
         let n = particles.len();
         let scratch = Scratch {
-            grid: GridState::new(model.layout.num_nodes()),
+            grid: GridState::new(model.boundary.num_points(&model.layout)),
             density: vec![0.0; n],
             stress: vec![Matrix::<D>::zeros(); n],
+            minv: vec![MlsInverse::regular(model.layout.h); n],
+            kind: vec![MlsKind::Regular; n],
         };
-        Self { model, particles, step: 0, time: 0.0, scratch }
+        Self { model, particles, step: 0, time: 0.0, ill_conditioned: 0, low_mass_nodes: 0, scratch }
     }
 
-    /// One explicit MLS-MPM step: (density) → stress → P2G → grid update and
-    /// walls → G2P → advection and deformation update.
+    /// One explicit MLS-MPM step: (density) → stress → (MLS inverses) → P2G →
+    /// grid update and walls → G2P → advection and deformation update.
     pub fn step(&mut self) -> Result<(), StepError> {
         let step = self.step + 1;
         let left = |OutOfGrid(particle)| StepError::LeftGrid { step, particle };
         let Self { model, particles, scratch, .. } = self;
         let layout = &model.layout;
         let dt = model.dt;
-        let minv = MlsInverse::regular(layout.h);
 
         if model.needs_grid_density() {
             transfer::scatter_mass(layout, &particles.x, &particles.mass, &mut scratch.grid.mass).map_err(left)?;
             transfer::gather_density(layout, &particles.x, &scratch.grid.mass, &mut scratch.density);
         }
         transfer::compute_stress(&model.materials, particles, &scratch.density, &mut scratch.stress);
-        transfer::p2g(layout, particles, &scratch.stress, &minv, dt, &mut scratch.grid).map_err(left)?;
-        transfer::grid_velocity(&mut scratch.grid, &model.gravity, dt);
-        model.boundary.apply(&scratch.grid.mass, &mut scratch.grid.momentum);
-        transfer::g2p(layout, &scratch.grid.momentum, &minv, &particles.x, &mut particles.v, &mut particles.c);
+        let low_mass = match &model.boundary {
+            Boundary::Naive(walls) => {
+                let nbh = RegularStencil { layout, minv: MlsInverse::regular(layout.h) };
+                transfer_momentum(&nbh, model, particles, &scratch.stress, &mut scratch.grid, |m, v| walls.apply(m, v))
+                    .map_err(left)?
+            }
+            Boundary::Augmented(grid) => {
+                // eq. (5), once per particle and step, reused by P2G, the force and G2P.
+                scratch
+                    .minv
+                    .par_iter_mut()
+                    .zip(scratch.kind.par_iter_mut())
+                    .zip(particles.x.par_iter())
+                    .enumerate()
+                    .try_for_each(|(p, ((minv, kind), x))| {
+                        (*minv, *kind) = grid.particle_inverse::<Dim<D>>(layout, x, p)?;
+                        Ok(())
+                    })
+                    .map_err(left)?;
+                self.ill_conditioned +=
+                    scratch.kind.iter().filter(|k| matches!(k, MlsKind::Regularized | MlsKind::Isolated)).count()
+                        as u64;
+                let nbh = AugmentedStencil { layout, grid, minv: &scratch.minv };
+                transfer_momentum(&nbh, model, particles, &scratch.stress, &mut scratch.grid, |m, v| grid.apply(m, v))
+                    .map_err(left)?
+            }
+        };
+        self.low_mass_nodes += low_mass as u64;
         transfer::advect(&model.materials, particles, dt);
 
         self.step = step;
@@ -146,6 +200,24 @@ where
             kinetic_energy: self.particles.kinetic_energy(),
             n_outside,
             max_penetration: deepest / self.model.layout.h,
+            ill_conditioned: self.ill_conditioned,
+            low_mass_nodes: self.low_mass_nodes,
         }
     }
+}
+
+/// P2G, grid velocity with gravity, the walls' conditions, G2P. Returns the low-mass node count.
+fn transfer_momentum<const D: usize, N: Neighbourhood<D>>(
+    nbh: &N,
+    model: &Model<D>,
+    particles: &mut Particles<D>,
+    stress: &[Matrix<D>],
+    grid: &mut GridState<D>,
+    walls: impl Fn(&[Real], &mut [Vector<D>]),
+) -> Result<usize, OutOfGrid> {
+    transfer::p2g(nbh, particles, stress, model.dt, grid)?;
+    let low_mass = transfer::grid_velocity(grid, &model.gravity, model.dt);
+    walls(&grid.mass, &mut grid.momentum);
+    transfer::g2p(nbh, &grid.momentum, &particles.x, &mut particles.v, &mut particles.c);
+    Ok(low_mass)
 }

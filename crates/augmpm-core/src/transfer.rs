@@ -4,6 +4,7 @@
 //! (`phi` for values, `g` for gradients and forces, eq. (4)–(6) of Toyota &
 //! Umetani 2024); on the regular grid they reduce to APIC MLS-MPM (Hu et al. 2018).
 
+use crate::augmented::AugmentedGrid;
 use crate::grid::{GridLayout, GridState};
 use crate::kernel::{MlsInverse, Stencil};
 use crate::material::{ConstitutiveModel, Material, MaterialPoint};
@@ -81,57 +82,119 @@ pub fn compute_stress<const D: usize>(
     });
 }
 
+/// The grid points a particle interpolates from (regular nodes, and boundary
+/// points on an augmented grid) and the inverse of its MLS moment matrix.
+pub trait Neighbourhood<const D: usize>: Sync {
+    /// Calls `f(point, w, x_point − x_p)` for every grid point of particle `p` at `x`.
+    fn for_each(&self, p: usize, x: &Vector<D>, f: impl FnMut(usize, Real, Vector<D>)) -> Result<(), OutOfGrid>;
+    /// `M_p⁻¹` of particle `p` (eq. (5)).
+    fn inverse(&self, p: usize) -> MlsInverse<D>;
+}
+
+/// The whole 3^D stencil with the closed-form inverse: MLS-MPM on the regular grid.
+pub struct RegularStencil<'a, const D: usize> {
+    pub layout: &'a GridLayout<D>,
+    pub minv: MlsInverse<D>,
+}
+
+impl<const D: usize> Neighbourhood<D> for RegularStencil<'_, D> {
+    #[inline]
+    fn for_each(&self, p: usize, x: &Vector<D>, mut f: impl FnMut(usize, Real, Vector<D>)) -> Result<(), OutOfGrid> {
+        let (s, origin) = stencil_of(self.layout, x, p)?;
+        s.for_each(self.layout.h, |o, w, d| f(origin + self.layout.offset(&o), w, d));
+        Ok(())
+    }
+    #[inline]
+    fn inverse(&self, _p: usize) -> MlsInverse<D> {
+        self.minv
+    }
+}
+
+/// Included nodes and boundary points of the augmented grid, with per-particle inverses.
+pub struct AugmentedStencil<'a, const D: usize> {
+    pub layout: &'a GridLayout<D>,
+    pub grid: &'a AugmentedGrid<D>,
+    pub minv: &'a [MlsInverse<D>],
+}
+
+impl<const D: usize> Neighbourhood<D> for AugmentedStencil<'_, D> {
+    #[inline]
+    fn for_each(&self, p: usize, x: &Vector<D>, f: impl FnMut(usize, Real, Vector<D>)) -> Result<(), OutOfGrid> {
+        self.grid.for_each_point(self.layout, x, p, f).map(|_| ())
+    }
+    #[inline]
+    fn inverse(&self, p: usize) -> MlsInverse<D> {
+        self.minv[p]
+    }
+}
+
 /// Particle→grid transfer of mass and momentum with the stress term:
-/// `m_i += φ m_p`, `(mv)_i += φ m_p (v_p + C_p (x_i − x_p)) − dt V_p σ_p g` (eq. (6)).
+/// `m_i += φ m_p`, `(mv)_i += φ m_p (v_p + C_p (x_i − x_p)) − dt V_p σ_p g` (eq. (6)),
+/// and the absolute mass `Σ |φ| m_p` that [`grid_velocity`] compares against.
 /// Serial, in particle order, so the sums are reproducible.
 pub fn p2g<const D: usize>(
-    layout: &GridLayout<D>,
+    nbh: &impl Neighbourhood<D>,
     particles: &Particles<D>,
     stress: &[Matrix<D>],
-    minv: &MlsInverse<D>,
     dt: Real,
     grid: &mut GridState<D>,
 ) -> Result<(), OutOfGrid> {
     grid.clear();
     for p in 0..particles.len() {
-        let (s, origin) = stencil_of(layout, &particles.x[p], p)?;
+        let minv = nbh.inverse(p);
         let mp = particles.mass[p];
         let (vp, cp, force) = (particles.v[p], particles.c[p], stress[p] * dt);
-        s.for_each(layout.h, |o, w, dpos| {
-            let i = origin + layout.offset(&o);
+        nbh.for_each(p, &particles.x[p], |i, w, dpos| {
             let (phi, g) = minv.shape(w, &dpos);
             grid.mass[i] += phi * mp;
+            grid.abs_mass[i] += phi.abs() * mp;
             grid.momentum[i] += (vp + cp * dpos) * (phi * mp) - force * g;
-        });
+        })?;
     }
     Ok(())
 }
 
+/// A node whose MLS mass `Σ φ m_p` is below this fraction of its absolute mass
+/// `Σ |φ| m_p` (negative shape functions near walls cancel) divides its momentum by
+/// that fraction of the absolute mass instead, which bounds its velocity by
+/// 1/fraction times the particles' (and is exact where no φ is negative).
+pub const LOW_MASS_FRACTION: Real = 0.5;
+
 /// Grid update: momentum → velocity, then gravity `g` (m/s²) over `dt` (s).
-/// Nodes without mass get zero velocity.
-pub fn grid_velocity<const D: usize>(grid: &mut GridState<D>, gravity: &Vector<D>, dt: Real) {
+/// Nodes without mass get zero velocity. Returns the number of low-mass nodes.
+pub fn grid_velocity<const D: usize>(grid: &mut GridState<D>, gravity: &Vector<D>, dt: Real) -> usize {
     let dv = gravity * dt;
-    grid.momentum.par_iter_mut().zip(grid.mass.par_iter()).for_each(|(mv, &m)| {
-        *mv = if m > 0.0 { *mv / m + dv } else { Vector::<D>::zeros() };
-    });
+    grid.momentum
+        .par_iter_mut()
+        .zip(grid.mass.par_iter())
+        .zip(grid.abs_mass.par_iter())
+        .map(|((mv, &m), &abs)| {
+            if abs <= 0.0 {
+                *mv = Vector::<D>::zeros();
+                return 0;
+            }
+            let floor = LOW_MASS_FRACTION * abs;
+            *mv = *mv / m.max(floor) + dv;
+            usize::from(m < floor)
+        })
+        .sum()
 }
 
 /// Grid→particle transfer: `v_p = Σ φ v_i`, `C_p = Σ v_i gᵀ` (eq. (4)).
 pub fn g2p<const D: usize>(
-    layout: &GridLayout<D>,
+    nbh: &impl Neighbourhood<D>,
     velocity: &[Vector<D>],
-    minv: &MlsInverse<D>,
     x: &[Vector<D>],
     v: &mut [Vector<D>],
     c: &mut [Matrix<D>],
 ) {
-    v.par_iter_mut().zip(c.par_iter_mut()).zip(x.par_iter()).for_each(|((vp, cp), xp)| {
-        let s = Stencil::new(xp, 1.0 / layout.h);
-        let origin = layout.stencil_origin(&s.base).expect("stencil checked by p2g");
+    v.par_iter_mut().zip(c.par_iter_mut()).zip(x.par_iter()).enumerate().for_each(|(p, ((vp, cp), xp))| {
+        let minv = nbh.inverse(p);
         let mut vn = Vector::<D>::zeros();
         let mut cn = Matrix::<D>::zeros();
-        s.for_each(layout.h, |o, w, dpos| {
-            let vi = velocity[origin + layout.offset(&o)];
+        // Every particle's points were checked by p2g on the same positions.
+        let _ = nbh.for_each(p, xp, |i, w, dpos| {
+            let vi = velocity[i];
             let (phi, g) = minv.shape(w, &dpos);
             vn += vi * phi;
             cn += vi * g.transpose();
@@ -208,9 +271,9 @@ mod tests {
         let layout = GridLayout::<2>::new(h, [20, 20]);
         let mut ps = random_particles(300);
         let stress = vec![Matrix2::zeros(); ps.len()];
-        let minv = MlsInverse::regular(h);
+        let nbh = RegularStencil { layout: &layout, minv: MlsInverse::regular(h) };
         let mut grid = GridState::new(layout.num_nodes());
-        p2g(&layout, &ps, &stress, &minv, 1e-3, &mut grid).unwrap();
+        p2g(&nbh, &ps, &stress, 1e-3, &mut grid).unwrap();
 
         let mass: f64 = ps.mass.iter().sum();
         let p_particles = ps.momentum();
@@ -224,7 +287,7 @@ mod tests {
 
         grid_velocity(&mut grid, &Vector2::zeros(), 1e-3);
         let (x, mut v, mut c) = (ps.x.clone(), ps.v.clone(), ps.c.clone());
-        g2p(&layout, &grid.momentum, &minv, &x, &mut v, &mut c);
+        g2p(&nbh, &grid.momentum, &x, &mut v, &mut c);
         ps.v = v;
         ps.c = c;
         let p_back = ps.momentum();

@@ -5,6 +5,7 @@
 
 mod errors;
 
+use augmpm_core::solver::Boundary;
 use augmpm_core::{Method, Scene, Simulation};
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
@@ -134,7 +135,18 @@ impl PySimulation {
         Ok(PyArray1::from_vec(py, d))
     }
 
-    /// Step, time, kinetic energy, particles outside the walls and the deepest penetration (cell widths).
+    /// Boundary grid points of the augmented grid, shape (B, 2); empty for the naive method.
+    #[getter]
+    fn boundary_points<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let xs: Vec<nalgebra::Vector2<f64>> = match &self.sim.model.boundary {
+            Boundary::Augmented(g) => g.points.iter().map(|p| p.x).collect(),
+            Boundary::Naive(_) => Vec::new(),
+        };
+        vectors_to_array(py, &xs)
+    }
+
+    /// Step, time, kinetic energy, particles outside the walls, the deepest penetration (cell widths),
+    /// and the augmented grid's counts of ill-conditioned particle-steps and low-mass node-steps.
     fn metrics<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let m = self.sim.metrics();
         let d = PyDict::new(py);
@@ -143,6 +155,8 @@ impl PySimulation {
         d.set_item("kinetic_energy", m.kinetic_energy)?;
         d.set_item("n_outside", m.n_outside)?;
         d.set_item("max_penetration", m.max_penetration)?;
+        d.set_item("ill_conditioned", m.ill_conditioned)?;
+        d.set_item("low_mass_nodes", m.low_mass_nodes)?;
         Ok(d)
     }
 }
