@@ -44,6 +44,18 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--gif", action="store_true", help="write animation.gif instead of animation.mp4")
     r.add_argument("--no-render", action="store_true", help="skip PNG frames and the animation")
     r.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+    c = sub.add_parser("compare", help="run a scene with the naive and the augmented walls, side by side")
+    c.add_argument("scene", type=Path, help="scene file (TOML)")
+    c.add_argument("--out", type=Path, help="output directory (default: runs/<scene name>-compare)")
+    c.add_argument("--steps", type=int, help="number of steps (default: the scene's time.steps)")
+    c.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    c.add_argument("--gif", action="store_true", help="write comparison.gif instead of comparison.mp4")
+    c.add_argument("--no-progress", action="store_true", help="hide the progress bars")
+
+    i = sub.add_parser("interp-test", help="the paper's Fig. 4 interpolation test (naive vs augmented)")
+    i.add_argument("--out", type=Path, default=Path("runs/interp-test"), help="output directory")
+    i.add_argument("--resolution", type=int, default=30, help="cells per side (default 30, as in the paper)")
     return p
 
 
@@ -76,6 +88,40 @@ def _run(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _compare(args: argparse.Namespace) -> int:
+    from augmpm.compare import compare_scene
+
+    if args.steps is not None and args.steps < 0:
+        raise _core.SceneError(f"--steps: must be non-negative, got {args.steps}")
+    scene = load_scene(args.scene, args.overrides)
+    out = args.out or Path("runs") / f"{scene.name or args.scene.stem}-compare"
+    result = compare_scene(
+        scene, out, steps=args.steps, progress=not args.no_progress, animation="gif" if args.gif else "mp4"
+    )
+    print(result.table())
+    ext = "gif" if args.gif else "mp4"
+    print(f"written to {out}: naive/, augmented/, comparison.csv, comparison.png, comparison.{ext}")
+    failed = [m for m, r in result.runs.items() if r.error]
+    for m in failed:
+        print(f"augmpm: {m} run failed: {result.runs[m].error}", file=sys.stderr)
+    return EXIT_FAILED_RUN if failed else EXIT_OK
+
+
+def _interp_test(args: argparse.Namespace) -> int:
+    from augmpm.interp import interpolation_test
+
+    if not 4 <= args.resolution <= 4096:
+        raise _core.SceneError(f"--resolution: must lie in [4, 4096], got {args.resolution}")
+    for r in interpolation_test(args.out, resolution=args.resolution):
+        print(
+            f"{r.method:>9}: within 2h of the wall, away from corners: "
+            f"max {r.max_error:.3g} h, RMS {r.rms_error:.3g} h; "
+            f"with corners: max {r.max_error_with_corners:.3g} h, RMS {r.rms_error_with_corners:.3g} h"
+        )
+    print(f"written to {args.out}: interp_test.png, interp_test.json")
+    return EXIT_OK
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
         args = _parser().parse_args(argv)
@@ -84,6 +130,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "run":
             return _run(args)
+        if args.command == "compare":
+            return _compare(args)
+        if args.command == "interp-test":
+            return _interp_test(args)
     except _core.SceneError as e:
         print(f"augmpm: bad input: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT

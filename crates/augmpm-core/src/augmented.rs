@@ -207,12 +207,33 @@ impl<const D: usize> AugmentedGrid<D> {
         x: &Vector<D>,
         p: usize,
     ) -> Result<(MlsInverse<D>, MlsKind), OutOfGrid> {
-        let mut m = Moments::new();
-        let closed = self.for_each_point(layout, x, p, |_, w, d| m.add(w, &d))?;
-        if closed {
+        let s = Stencil::new(x, 1.0 / layout.h);
+        let origin = layout.stencil_origin(&s.base).ok_or(OutOfGrid(p))?;
+        if self.closed_form[origin] {
             return Ok((MlsInverse::regular(layout.h), MlsKind::Regular));
         }
+        let mut m = Moments::new();
+        self.for_each_point(layout, x, p, |_, w, d| m.add(w, &d))?;
         Ok(MlsInverse::from_moments::<Ops>(&m, layout.h))
+    }
+
+    /// MLS reconstruction (eq. (4)) at `x` of a scalar field given at the grid points
+    /// (`values[i]` for node `i`, `values[num_nodes + b]` for boundary point `b`):
+    /// the value, its gradient, and how the MLS system was solved.
+    pub fn interpolate<Ops: DimOps<D>>(
+        &self,
+        layout: &GridLayout<D>,
+        x: &Vector<D>,
+        values: &[Real],
+    ) -> Result<(Real, Vector<D>, MlsKind), OutOfGrid> {
+        let (minv, kind) = self.particle_inverse::<Ops>(layout, x, 0)?;
+        let (mut u, mut grad) = (0.0, Vector::<D>::zeros());
+        self.for_each_point(layout, x, 0, |i, w, d| {
+            let (phi, g) = minv.shape(w, &d);
+            u += phi * values[i];
+            grad += g * values[i];
+        })?;
+        Ok((u, grad, kind))
     }
 
     /// Wall conditions at the boundary points (grid points `num_nodes..`), after momentum → velocity.

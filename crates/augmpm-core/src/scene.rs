@@ -152,6 +152,7 @@ pub struct Scene {
     pub wall_condition: WallCondition,
     #[serde(default)]
     pub walls: Vec<WallSpec>,
+    #[serde(default)]
     pub bodies: Vec<BodySpec>,
     #[serde(default)]
     pub augmented: AugmentedSpec,
@@ -311,33 +312,12 @@ impl Scene {
         }
     }
 
-    /// Validates the scene and builds the simulation. Returns warnings beside it.
-    pub fn build(&self, method: Method) -> Result<(Simulation<2>, Vec<String>), SceneError> {
-        finite("gravity", &self.gravity)?;
+    /// The grid, the material region and the walls' boundary handling, without bodies.
+    pub fn build_walls(&self, method: Method) -> Result<(GridLayout<2>, Walls2, Boundary<2>), SceneError> {
         let layout = self.layout()?;
         let h = layout.h;
         let extent = Point::new(layout.extent()[0], layout.extent()[1]);
         let (region, motions) = self.walls(extent)?;
-        if self.bodies.is_empty() {
-            return Err(SceneError::new("bodies", "a scene needs at least one body"));
-        }
-        let mut materials = Vec::new();
-        let mut particles = Particles::<2>::default();
-        for (b, body) in self.bodies.iter().enumerate() {
-            let key = format!("bodies[{b}]");
-            body.material.validate().map_err(|(k, reason)| SceneError::new(format!("{key}.material.{k}"), reason))?;
-            finite(&format!("{key}.velocity"), &body.velocity)?;
-            materials.push(body.material.clone());
-            let first = particles.len();
-            seed_body(&key, body, b, self.seed, h, &mut particles)?;
-            let outside = (first..particles.len()).filter(|&p| region.distance(&particles.x[p]).distance > 0.0).count();
-            if outside > 0 {
-                return Err(SceneError::new(
-                    key,
-                    format!("body lies partly outside the walls ({outside} of {} particles)", particles.len() - first),
-                ));
-            }
-        }
         let boundary = match method {
             Method::Naive => Boundary::Naive(NaiveBoundary::new(&layout, &region, motions)),
             Method::Augmented => {
@@ -359,6 +339,34 @@ impl Scene {
                 Boundary::Augmented(AugmentedGrid::new(&layout, &region, points, motions, delta * h))
             }
         };
+        Ok((layout, region, boundary))
+    }
+
+    /// Validates the scene and builds the simulation. Returns warnings beside it.
+    pub fn build(&self, method: Method) -> Result<(Simulation<2>, Vec<String>), SceneError> {
+        finite("gravity", &self.gravity)?;
+        let (layout, region, boundary) = self.build_walls(method)?;
+        let h = layout.h;
+        if self.bodies.is_empty() {
+            return Err(SceneError::new("bodies", "a scene needs at least one body"));
+        }
+        let mut materials = Vec::new();
+        let mut particles = Particles::<2>::default();
+        for (b, body) in self.bodies.iter().enumerate() {
+            let key = format!("bodies[{b}]");
+            body.material.validate().map_err(|(k, reason)| SceneError::new(format!("{key}.material.{k}"), reason))?;
+            finite(&format!("{key}.velocity"), &body.velocity)?;
+            materials.push(body.material.clone());
+            let first = particles.len();
+            seed_body(&key, body, b, self.seed, h, &mut particles)?;
+            let outside = (first..particles.len()).filter(|&p| region.distance(&particles.x[p]).distance > 0.0).count();
+            if outside > 0 {
+                return Err(SceneError::new(
+                    key,
+                    format!("body lies partly outside the walls ({outside} of {} particles)", particles.len() - first),
+                ));
+            }
+        }
         let mut model =
             Model { layout, materials, gravity: point(&self.gravity), region: Box::new(region), boundary, dt: 0.0 };
         let (dt, warning) = self.dt(model.stable_dt())?;

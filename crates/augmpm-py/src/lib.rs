@@ -4,6 +4,7 @@
 //! [`PySimulation`] as JSON; arrays come back as numpy arrays.
 
 mod errors;
+mod grid;
 
 use augmpm_core::solver::Boundary;
 use augmpm_core::{Method, Scene, Simulation};
@@ -20,7 +21,31 @@ struct PySimulation {
     warnings: Vec<String>,
 }
 
-fn vectors_to_array<'py>(py: Python<'py>, v: &[nalgebra::Vector2<f64>]) -> PyResult<Bound<'py, PyArray2<f64>>> {
+/// Parses a boundary method name.
+pub(crate) fn parse_method(method: &str) -> PyResult<Method> {
+    match method {
+        "naive" => Ok(Method::Naive),
+        "augmented" => Ok(Method::Augmented),
+        other => Err(scene_error("method", &format!("unknown method {other:?}; expected \"naive\" or \"augmented\""))),
+    }
+}
+
+/// Points of an (M, 2) array.
+pub(crate) fn rows(a: &numpy::PyReadonlyArray2<'_, f64>) -> PyResult<Vec<nalgebra::Vector2<f64>>> {
+    let a = a.as_array();
+    if a.ncols() != 2 {
+        return Err(pyo3::exceptions::PyValueError::new_err(format!(
+            "points must have shape (M, 2), got {:?}",
+            a.shape()
+        )));
+    }
+    Ok(a.rows().into_iter().map(|r| nalgebra::Vector2::new(r[0], r[1])).collect())
+}
+
+pub(crate) fn vectors_to_array<'py>(
+    py: Python<'py>,
+    v: &[nalgebra::Vector2<f64>],
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let flat: Vec<f64> = v.iter().flat_map(|x| [x[0], x[1]]).collect();
     PyArray1::from_vec(py, flat).reshape([v.len(), 2])
 }
@@ -122,17 +147,8 @@ impl PySimulation {
         py: Python<'py>,
         points: numpy::PyReadonlyArray2<'py, f64>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let a = points.as_array();
-        if a.ncols() != 2 {
-            return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                "points must have shape (M, 2), got {:?}",
-                a.shape()
-            )));
-        }
         let region = self.sim.model.region.as_ref();
-        let d: Vec<f64> =
-            a.rows().into_iter().map(|r| region.distance(&nalgebra::Vector2::new(r[0], r[1])).distance).collect();
-        Ok(PyArray1::from_vec(py, d))
+        Ok(PyArray1::from_vec(py, rows(&points)?.iter().map(|x| region.distance(x).distance).collect()))
     }
 
     /// Boundary grid points of the augmented grid, shape (B, 2); empty for the naive method.
@@ -164,6 +180,7 @@ impl PySimulation {
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PySimulation>()?;
+    m.add_class::<grid::PyGrid>()?;
     errors::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
