@@ -71,6 +71,32 @@ pub fn project_boundary<const D: usize>(
     out + wall_v
 }
 
+/// Most boundary points remembered per particle between the stages of a step;
+/// a particle that sees more (dense sampling, sharp corners) looks them up again.
+pub const MAX_NEAR: usize = 12;
+
+/// The boundary points in a particle's support, found once per step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct NearPoints {
+    /// Number of entries of `idx` in use; `u8::MAX` when they did not fit.
+    len: u8,
+    idx: [u32; MAX_NEAR],
+}
+
+impl NearPoints {
+    pub const NONE: Self = Self { len: 0, idx: [0; MAX_NEAR] };
+    const OVERFLOW: u8 = u8::MAX;
+
+    fn push(&mut self, b: u32) {
+        if (self.len as usize) < MAX_NEAR {
+            self.idx[self.len as usize] = b;
+            self.len += 1;
+        } else {
+            self.len = Self::OVERFLOW;
+        }
+    }
+}
+
 /// Regular nodes kept for interpolation, the boundary points, a per-cell
 /// index of the boundary points, and which stencils can use the closed form.
 #[derive(Clone, Debug)]
@@ -153,7 +179,8 @@ impl<const D: usize> AugmentedGrid<D> {
     }
 
     /// Calls `f(point, w, x_point − x_p)` for each included node of the stencil and,
-    /// unless `closed_form`, each boundary point in the B-spline support of `x`.
+    /// unless the stencil takes the closed form, each boundary point in the B-spline
+    /// support of `x` (looked up in the per-cell index). Returns whether it was closed.
     #[inline]
     pub fn for_each_point(
         &self,
@@ -162,59 +189,103 @@ impl<const D: usize> AugmentedGrid<D> {
         p: usize,
         mut f: impl FnMut(usize, Real, Vector<D>),
     ) -> Result<bool, OutOfGrid> {
+        let closed = self.for_each_node(layout, x, p, &mut f)?;
+        if !closed {
+            self.scan_points(layout, x, |b, w, d| f(self.num_nodes() + b as usize, w, d));
+        }
+        Ok(closed)
+    }
+
+    /// As [`Self::for_each_point`], with the boundary points remembered in `near`.
+    #[inline]
+    pub fn for_each_cached(
+        &self,
+        layout: &GridLayout<D>,
+        x: &Vector<D>,
+        p: usize,
+        near: &NearPoints,
+        mut f: impl FnMut(usize, Real, Vector<D>),
+    ) -> Result<(), OutOfGrid> {
+        if near.len == NearPoints::OVERFLOW {
+            return self.for_each_point(layout, x, p, f).map(|_| ());
+        }
+        self.for_each_node(layout, x, p, &mut f)?;
+        let inv_h = 1.0 / layout.h;
+        for &b in &near.idx[..near.len as usize] {
+            let d = self.points[b as usize].x - x;
+            f(self.num_nodes() + b as usize, weight(&d, inv_h), d);
+        }
+        Ok(())
+    }
+
+    /// The included nodes of the stencil at `x`; returns whether the closed form applies.
+    #[inline]
+    fn for_each_node(
+        &self,
+        layout: &GridLayout<D>,
+        x: &Vector<D>,
+        p: usize,
+        f: &mut impl FnMut(usize, Real, Vector<D>),
+    ) -> Result<bool, OutOfGrid> {
         let s = Stencil::new(x, 1.0 / layout.h);
         let origin = layout.stencil_origin(&s.base).ok_or(OutOfGrid(p))?;
-        let closed = self.closed_form[origin];
         s.for_each(layout.h, |o, w, d| {
             let i = origin + layout.offset(&o);
             if self.included[i] {
                 f(i, w, d);
             }
         });
-        if !closed {
-            let inv_h = 1.0 / layout.h;
-            let reach = 1.5 * layout.h;
-            let lo: [i64; D] = std::array::from_fn(|k| ((x[k] - reach) * inv_h).floor() as i64);
-            let hi: [i64; D] = std::array::from_fn(|k| ((x[k] + reach) * inv_h).floor() as i64);
-            let span: [usize; D] = std::array::from_fn(|k| (hi[k] - lo[k] + 1) as usize);
-            let total: usize = span.iter().product();
-            let base = self.num_nodes();
-            for k in 0..total {
-                let mut c = lo;
-                let mut r = k;
-                for (a, ck) in c.iter_mut().enumerate() {
-                    *ck += (r % span[a]) as i64;
-                    r /= span[a];
-                }
-                let Some(cell) = layout.node_index(&c) else { continue };
-                let range = self.cell_start[cell] as usize..self.cell_start[cell + 1] as usize;
-                for &b in &self.cell_points[range] {
-                    let d = self.points[b as usize].x - x;
-                    let w = weight(&d, inv_h);
-                    if w > 0.0 {
-                        f(base + b as usize, w, d);
-                    }
+        Ok(self.closed_form[origin])
+    }
+
+    /// Calls `f(b, w, x_b − x)` for each boundary point `b` with a non-zero weight at `x`.
+    #[inline]
+    fn scan_points(&self, layout: &GridLayout<D>, x: &Vector<D>, mut f: impl FnMut(u32, Real, Vector<D>)) {
+        let inv_h = 1.0 / layout.h;
+        let reach = 1.5 * layout.h;
+        let lo: [i64; D] = std::array::from_fn(|k| ((x[k] - reach) * inv_h).floor() as i64);
+        let hi: [i64; D] = std::array::from_fn(|k| ((x[k] + reach) * inv_h).floor() as i64);
+        let span: [usize; D] = std::array::from_fn(|k| (hi[k] - lo[k] + 1) as usize);
+        let total: usize = span.iter().product();
+        for k in 0..total {
+            let mut c = lo;
+            let mut r = k;
+            for (a, ck) in c.iter_mut().enumerate() {
+                *ck += (r % span[a]) as i64;
+                r /= span[a];
+            }
+            let Some(cell) = layout.node_index(&c) else { continue };
+            let range = self.cell_start[cell] as usize..self.cell_start[cell + 1] as usize;
+            for &b in &self.cell_points[range] {
+                let d = self.points[b as usize].x - x;
+                let w = weight(&d, inv_h);
+                if w > 0.0 {
+                    f(b, w, d);
                 }
             }
         }
-        Ok(closed)
     }
 
-    /// The particle's MLS inverse (eq. (5)), closed form where the stencil is whole and no boundary point is near.
+    /// The particle's MLS inverse (eq. (5)), closed form where the stencil is whole and no
+    /// boundary point is near, and the boundary points it sees, for the later stages.
     pub fn particle_inverse<Ops: DimOps<D>>(
         &self,
         layout: &GridLayout<D>,
         x: &Vector<D>,
         p: usize,
-    ) -> Result<(MlsInverse<D>, MlsKind), OutOfGrid> {
-        let s = Stencil::new(x, 1.0 / layout.h);
-        let origin = layout.stencil_origin(&s.base).ok_or(OutOfGrid(p))?;
-        if self.closed_form[origin] {
-            return Ok((MlsInverse::regular(layout.h), MlsKind::Regular));
-        }
+    ) -> Result<(MlsInverse<D>, MlsKind, NearPoints), OutOfGrid> {
         let mut m = Moments::new();
-        self.for_each_point(layout, x, p, |_, w, d| m.add(w, &d))?;
-        Ok(MlsInverse::from_moments::<Ops>(&m, layout.h))
+        let closed = self.for_each_node(layout, x, p, &mut |_, w, d| m.add(w, &d))?;
+        if closed {
+            return Ok((MlsInverse::regular(layout.h), MlsKind::Regular, NearPoints::NONE));
+        }
+        let mut near = NearPoints::NONE;
+        self.scan_points(layout, x, |b, w, d| {
+            m.add(w, &d);
+            near.push(b);
+        });
+        let (minv, kind) = MlsInverse::from_moments::<Ops>(&m, layout.h);
+        Ok((minv, kind, near))
     }
 
     /// MLS reconstruction (eq. (4)) at `x` of a scalar field given at the grid points
@@ -226,7 +297,7 @@ impl<const D: usize> AugmentedGrid<D> {
         x: &Vector<D>,
         values: &[Real],
     ) -> Result<(Real, Vector<D>, MlsKind), OutOfGrid> {
-        let (minv, kind) = self.particle_inverse::<Ops>(layout, x, 0)?;
+        let (minv, kind, _) = self.particle_inverse::<Ops>(layout, x, 0)?;
         let (mut u, mut grad) = (0.0, Vector::<D>::zeros());
         self.for_each_point(layout, x, 0, |i, w, d| {
             let (phi, g) = minv.shape(w, &d);

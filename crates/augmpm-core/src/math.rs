@@ -53,7 +53,14 @@ macro_rules! impl_dim_ops {
                 m.determinant()
             }
             fn min_sym_eigenvalue(m: &Matrix<$d>) -> Real {
-                m.symmetric_eigenvalues().min()
+                if $d == 2 {
+                    // Closed form for 2×2: λ_min = t − √(t² − det), t = tr/2 (the hot path in 2D).
+                    let t = 0.5 * (m[(0, 0)] + m[(1, 1)]);
+                    let det = m[(0, 0)] * m[(1, 1)] - m[(0, 1)] * m[(1, 0)];
+                    t - (t * t - det).max(0.0).sqrt()
+                } else {
+                    m.symmetric_eigenvalues().min()
+                }
             }
             #[inline]
             fn inverse(m: &Matrix<$d>) -> Option<Matrix<$d>> {
@@ -98,6 +105,14 @@ mod tests {
         let m3 = Matrix3::new(1.0, 0.2, 0.0, 0.1, 0.8, 0.3, 0.0, -0.2, 1.3);
         let (u, s, v) = Dim::<3>::svd(&m3);
         assert!((u * Matrix3::from_diagonal(&s) * v.transpose() - m3).norm() < 1e-12);
+    }
+
+    #[test]
+    fn smallest_symmetric_eigenvalue() {
+        let m = Matrix2::new(2.0, 1.0, 1.0, 2.0); // eigenvalues 1 and 3
+        assert!((Dim::<2>::min_sym_eigenvalue(&m) - 1.0).abs() < 1e-14);
+        let m3 = Matrix3::new(2.0, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 4.0);
+        assert!((Dim::<3>::min_sym_eigenvalue(&m3) - 0.5).abs() < 1e-14);
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! The model (what does not change during a run), the simulation state and
 //! the time step, which only calls the stages of [`crate::transfer`] in order.
 
-use crate::augmented::AugmentedGrid;
+use crate::augmented::{AugmentedGrid, NearPoints};
 use crate::boundary::NaiveBoundary;
 use crate::geometry::Region;
 use crate::grid::{GridLayout, GridState};
@@ -77,6 +77,7 @@ struct Scratch<const D: usize> {
     /// Per-particle MLS inverse and how it was obtained (augmented grid only).
     minv: Vec<MlsInverse<D>>,
     kind: Vec<MlsKind>,
+    near: Vec<NearPoints>,
 }
 
 /// Diagnostics of the current state.
@@ -122,6 +123,7 @@ where
             stress: vec![Matrix::<D>::zeros(); n],
             minv: vec![MlsInverse::regular(model.layout.h); n],
             kind: vec![MlsKind::Regular; n],
+            near: vec![NearPoints::NONE; n],
         };
         Self { model, particles, step: 0, time: 0.0, ill_conditioned: 0, low_mass_nodes: 0, scratch }
     }
@@ -152,17 +154,18 @@ where
                     .minv
                     .par_iter_mut()
                     .zip(scratch.kind.par_iter_mut())
+                    .zip(scratch.near.par_iter_mut())
                     .zip(particles.x.par_iter())
                     .enumerate()
-                    .try_for_each(|(p, ((minv, kind), x))| {
-                        (*minv, *kind) = grid.particle_inverse::<Dim<D>>(layout, x, p)?;
+                    .try_for_each(|(p, (((minv, kind), near), x))| {
+                        (*minv, *kind, *near) = grid.particle_inverse::<Dim<D>>(layout, x, p)?;
                         Ok(())
                     })
                     .map_err(left)?;
                 self.ill_conditioned +=
                     scratch.kind.iter().filter(|k| matches!(k, MlsKind::Regularized | MlsKind::Isolated)).count()
                         as u64;
-                let nbh = AugmentedStencil { layout, grid, minv: &scratch.minv };
+                let nbh = AugmentedStencil { layout, grid, minv: &scratch.minv, near: &scratch.near };
                 transfer_momentum(&nbh, model, particles, &scratch.stress, &mut scratch.grid, |m, v| grid.apply(m, v))
                     .map_err(left)?
             }

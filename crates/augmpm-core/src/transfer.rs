@@ -4,7 +4,7 @@
 //! (`phi` for values, `g` for gradients and forces, eq. (4)–(6) of Toyota &
 //! Umetani 2024); on the regular grid they reduce to APIC MLS-MPM (Hu et al. 2018).
 
-use crate::augmented::AugmentedGrid;
+use crate::augmented::{AugmentedGrid, NearPoints};
 use crate::grid::{GridLayout, GridState};
 use crate::kernel::{MlsInverse, Stencil};
 use crate::material::{ConstitutiveModel, Material, MaterialPoint};
@@ -115,12 +115,13 @@ pub struct AugmentedStencil<'a, const D: usize> {
     pub layout: &'a GridLayout<D>,
     pub grid: &'a AugmentedGrid<D>,
     pub minv: &'a [MlsInverse<D>],
+    pub near: &'a [NearPoints],
 }
 
 impl<const D: usize> Neighbourhood<D> for AugmentedStencil<'_, D> {
     #[inline]
     fn for_each(&self, p: usize, x: &Vector<D>, f: impl FnMut(usize, Real, Vector<D>)) -> Result<(), OutOfGrid> {
-        self.grid.for_each_point(self.layout, x, p, f).map(|_| ())
+        self.grid.for_each_cached(self.layout, x, p, &self.near[p], f)
     }
     #[inline]
     fn inverse(&self, p: usize) -> MlsInverse<D> {
@@ -294,6 +295,28 @@ mod tests {
         let l_back = angular_momentum(&ps.x, &ps.v, &ps.mass, &ps.c, h);
         assert!((p_back - p_particles).norm() < 1e-12 * mass, "{p_back} vs {p_particles}");
         assert!((l_back - l_particles).abs() < 1e-12 * mass, "{l_back} vs {l_particles}");
+    }
+
+    /// A node whose MLS mass cancels below half its absolute mass divides by that half: its velocity
+    /// stays within twice the particles' instead of blowing up, and it is counted.
+    #[test]
+    fn low_mass_nodes_are_bounded_and_counted() {
+        let mut grid = GridState::<2> {
+            mass: vec![1.0, 0.1, -0.2, 0.0],
+            abs_mass: vec![1.0, 1.0, 1.0, 0.0],
+            momentum: vec![
+                Vector2::new(2.0, 0.0),
+                Vector2::new(0.3, 0.0),
+                Vector2::new(-0.4, 0.0),
+                Vector2::new(5.0, 0.0),
+            ],
+        };
+        let low = grid_velocity(&mut grid, &Vector2::zeros(), 1e-3);
+        assert_eq!(low, 2);
+        assert_eq!(grid.momentum[0], Vector2::new(2.0, 0.0));
+        assert!((grid.momentum[1] - Vector2::new(0.6, 0.0)).norm() < 1e-15);
+        assert!((grid.momentum[2] - Vector2::new(-0.8, 0.0)).norm() < 1e-15);
+        assert_eq!(grid.momentum[3], Vector2::zeros());
     }
 
     /// A particle whose stencil leaves the grid is reported by index, not indexed out of bounds.

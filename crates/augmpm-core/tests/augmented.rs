@@ -120,9 +120,9 @@ fn degenerate_particles_are_detected() {
     let walls = tilted_container(0.0, 0.3);
     let layout = GridLayout::new(1.0 / 32.0, [32, 32]);
     let grid = augmented(&walls, &layout, 0.25);
-    let (_, kind) = grid.particle_inverse::<Dim<2>>(&layout, &Point::new(0.5, 0.1), 0).unwrap();
+    let (_, kind, _) = grid.particle_inverse::<Dim<2>>(&layout, &Point::new(0.5, 0.1), 0).unwrap();
     assert_eq!(kind, MlsKind::Isolated);
-    let (minv, kind) = grid.particle_inverse::<Dim<2>>(&layout, &Point::new(0.5, 0.3 - 1.2 * layout.h), 0).unwrap();
+    let (minv, kind, _) = grid.particle_inverse::<Dim<2>>(&layout, &Point::new(0.5, 0.3 - 1.2 * layout.h), 0).unwrap();
     assert_eq!(kind, MlsKind::Regularized);
     assert!(minv.gamma.iter().chain(minv.beta.iter()).all(|v| v.is_finite()));
 }
