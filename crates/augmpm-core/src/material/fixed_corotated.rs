@@ -1,6 +1,6 @@
 //! Fixed-corotated hyperelasticity (Stomakhin et al. 2012).
 
-use super::{advance_f, elastic_dt, lame, poisson, positive, ConstitutiveModel, MaterialPoint};
+use super::{advance_f, elastic_dt, lame, validate_solid, ConstitutiveModel, MaterialPoint};
 use crate::math::{Dim, DimOps, Matrix, Real};
 use serde::{Deserialize, Serialize};
 
@@ -18,9 +18,7 @@ pub struct FixedCorotated {
 
 impl FixedCorotated {
     pub(super) fn validate(&self) -> Result<(), (&'static str, String)> {
-        positive("density", self.density)?;
-        positive("youngs_modulus", self.youngs_modulus)?;
-        poisson(self.poisson_ratio)
+        validate_solid(self.density, self.youngs_modulus, self.poisson_ratio)
     }
 }
 
@@ -53,8 +51,7 @@ where
     }
 
     fn stable_dt(&self, h: Real) -> Real {
-        let (mu, lambda) = lame(self.youngs_modulus, self.poisson_ratio);
-        elastic_dt(h, mu, lambda, self.density)
+        elastic_dt(h, self.density, self.youngs_modulus, self.poisson_ratio)
     }
 }
 
@@ -69,14 +66,7 @@ mod tests {
         let m = FixedCorotated { density: 1000.0, youngs_modulus: 1e6, poisson_ratio: 0.3 };
         let (mu, lambda) = lame(1e6, 0.3);
         let s = 1.2;
-        let p = MaterialPoint::<2> {
-            f: Matrix2::new(s, 0.0, 0.0, 1.0),
-            jp: 1.0,
-            grad_v: Matrix2::zeros(),
-            mass: 1.0,
-            vol0: 0.5,
-            density: 0.0,
-        };
+        let p = MaterialPoint::<2>::solid(Matrix2::new(s, 0.0, 0.0, 1.0), 1.0, 0.5);
         let tau = m.volume_stress(&p) / 0.5;
         let txx = 2.0 * mu * (s - 1.0) * s + lambda * (s - 1.0) * s;
         let tyy = lambda * (s - 1.0) * s;
@@ -88,14 +78,7 @@ mod tests {
     fn rotation_is_stress_free() {
         let m = FixedCorotated { density: 1000.0, youngs_modulus: 1e6, poisson_ratio: 0.3 };
         let (c, s) = (0.8f64.cos(), 0.8f64.sin());
-        let p = MaterialPoint::<2> {
-            f: Matrix2::new(c, -s, s, c),
-            jp: 1.0,
-            grad_v: Matrix2::zeros(),
-            mass: 1.0,
-            vol0: 1.0,
-            density: 0.0,
-        };
+        let p = MaterialPoint::<2>::solid(Matrix2::new(c, -s, s, c), 1.0, 1.0);
         assert!(m.volume_stress(&p).norm() < 1e-6);
     }
 }

@@ -32,6 +32,13 @@ pub struct MaterialPoint<const D: usize> {
     pub density: Real,
 }
 
+impl<const D: usize> MaterialPoint<D> {
+    /// A point of a solid with deformation gradient `f` and initial volume `vol0`, at rest.
+    pub fn solid(f: Matrix<D>, jp: Real, vol0: Real) -> Self {
+        Self { f, jp, grad_v: Matrix::<D>::zeros(), mass: 1.0, vol0, density: 0.0 }
+    }
+}
+
 /// A constitutive model of the explicit MLS-MPM step.
 pub trait ConstitutiveModel<const D: usize> {
     /// `V_p σ_p`: current particle volume times Cauchy stress (Pa·m³, or Pa·m² in 2D).
@@ -61,9 +68,17 @@ pub fn lame(youngs_modulus: Real, poisson_ratio: Real) -> (Real, Real) {
     (mu, lambda)
 }
 
-/// Time step at which the P-wave of a solid crosses one cell of width `h`.
-fn elastic_dt(h: Real, mu: Real, lambda: Real, density: Real) -> Real {
+/// Time step (s) at which the P-wave of a solid crosses one cell of width `h` (m).
+fn elastic_dt(h: Real, density: Real, youngs_modulus: Real, poisson_ratio: Real) -> Real {
+    let (mu, lambda) = lame(youngs_modulus, poisson_ratio);
     h / ((lambda + 2.0 * mu) / density).sqrt()
+}
+
+/// Checks the density and elastic moduli every solid model has.
+fn validate_solid(density: Real, youngs_modulus: Real, poisson_ratio: Real) -> Result<(), (&'static str, String)> {
+    positive("density", density)?;
+    positive("youngs_modulus", youngs_modulus)?;
+    poisson(poisson_ratio)
 }
 
 /// `F ← (I + dt ∇v) F`, the MLS-MPM deformation update.

@@ -2,7 +2,7 @@
 //! simulation") on the fixed-corotated model.
 
 use super::fixed_corotated::kirchhoff;
-use super::{advance_f, elastic_dt, lame, poisson, positive, ConstitutiveModel, MaterialPoint};
+use super::{advance_f, elastic_dt, lame, positive, validate_solid, ConstitutiveModel, MaterialPoint};
 use crate::math::{Dim, DimOps, Matrix, Real};
 use serde::{Deserialize, Serialize};
 
@@ -53,9 +53,7 @@ fn default_jp_max() -> Real {
 
 impl SnowStomakhin2013 {
     pub(super) fn validate(&self) -> Result<(), (&'static str, String)> {
-        positive("density", self.density)?;
-        positive("youngs_modulus", self.youngs_modulus)?;
-        poisson(self.poisson_ratio)?;
+        validate_solid(self.density, self.youngs_modulus, self.poisson_ratio)?;
         if !(self.critical_compression > 0.0 && self.critical_compression < 1.0) {
             return Err(("critical_compression", format!("must lie in (0, 1), got {}", self.critical_compression)));
         }
@@ -104,8 +102,7 @@ where
     }
 
     fn stable_dt(&self, h: Real) -> Real {
-        let (mu, lambda) = lame(self.youngs_modulus, self.poisson_ratio);
-        elastic_dt(h, mu, lambda, self.density)
+        elastic_dt(h, self.density, self.youngs_modulus, self.poisson_ratio)
     }
 }
 
@@ -148,14 +145,7 @@ mod tests {
     #[test]
     fn hardening_scales_stress() {
         let m = snow();
-        let mut p = MaterialPoint::<2> {
-            f: Matrix2::new(1.005, 0.0, 0.0, 1.0),
-            jp: 1.0,
-            grad_v: Matrix2::zeros(),
-            mass: 1.0,
-            vol0: 1.0,
-            density: 0.0,
-        };
+        let mut p = MaterialPoint::<2>::solid(Matrix2::new(1.005, 0.0, 0.0, 1.0), 1.0, 1.0);
         let s1 = m.volume_stress(&p);
         let (mu, lambda) = lame(1.4e5, 0.2);
         let s = 1.005;

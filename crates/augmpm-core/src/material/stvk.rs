@@ -1,6 +1,6 @@
 //! St. Venant–Kirchhoff hyperelasticity.
 
-use super::{advance_f, elastic_dt, lame, poisson, positive, ConstitutiveModel, MaterialPoint};
+use super::{advance_f, elastic_dt, lame, validate_solid, ConstitutiveModel, MaterialPoint};
 use crate::math::{Matrix, Real};
 use serde::{Deserialize, Serialize};
 
@@ -19,9 +19,7 @@ pub struct StVenantKirchhoff {
 
 impl StVenantKirchhoff {
     pub(super) fn validate(&self) -> Result<(), (&'static str, String)> {
-        positive("density", self.density)?;
-        positive("youngs_modulus", self.youngs_modulus)?;
-        poisson(self.poisson_ratio)
+        validate_solid(self.density, self.youngs_modulus, self.poisson_ratio)
     }
 }
 
@@ -43,8 +41,7 @@ impl<const D: usize> ConstitutiveModel<D> for StVenantKirchhoff {
     }
 
     fn stable_dt(&self, h: Real) -> Real {
-        let (mu, lambda) = lame(self.youngs_modulus, self.poisson_ratio);
-        elastic_dt(h, mu, lambda, self.density)
+        elastic_dt(h, self.density, self.youngs_modulus, self.poisson_ratio)
     }
 }
 
@@ -59,14 +56,7 @@ mod tests {
         let m = StVenantKirchhoff { density: 1000.0, youngs_modulus: 1e6, poisson_ratio: 0.25 };
         let (mu, lambda) = lame(1e6, 0.25);
         let s = 1.1;
-        let p = MaterialPoint::<2> {
-            f: Matrix2::new(s, 0.0, 0.0, 1.0),
-            jp: 1.0,
-            grad_v: Matrix2::zeros(),
-            mass: 1.0,
-            vol0: 2.0,
-            density: 0.0,
-        };
+        let p = MaterialPoint::<2>::solid(Matrix2::new(s, 0.0, 0.0, 1.0), 1.0, 2.0);
         let exx = 0.5 * (s * s - 1.0);
         let expect = Matrix2::new(s * s * (2.0 * mu + lambda) * exx, 0.0, 0.0, lambda * exx) * 2.0;
         assert!((m.volume_stress(&p) - expect).norm() < 1e-9 * expect.norm());
