@@ -48,6 +48,8 @@ BAD = [
     ("body outside the domain", "bodies.0.max", [1.2, 0.8], "bodies[0]", "outside the walls"),
     ("both dt and cfl", "time.cfl", 0.5, "time", "exactly one of dt and cfl"),
     ("grid height not whole cells", "grid.domain", [1.0, 0.51], "grid", "whole number"),
+    ("grid too large for memory", "grid.resolution", 20000, "grid.resolution", "MB"),
+    ("seeding too dense for memory", "bodies.0.seeding", {"spacing": 1e-5}, "bodies[0].seeding", "raise the spacing"),
 ]
 
 

@@ -185,6 +185,13 @@ impl Default for AugmentedSpec {
     }
 }
 
+/// Largest grid accepted (nodes, ghosts included): 16.7 M nodes, about 1 GB of node state.
+const MAX_GRID_NODES: u64 = 1 << 24;
+/// Bytes of state per grid node (mass, absolute mass, momentum in 2D, flags), for the message.
+const GRID_BYTES_PER_NODE: u64 = 48;
+/// Largest number of jittered candidate points per body: 20 M particles need about 4 GB.
+const MAX_SEED_CANDIDATES: u64 = 20_000_000;
+
 fn point(p: &[Real; 2]) -> Point {
     Point::new(p[0], p[1])
 }
@@ -244,6 +251,16 @@ impl Scene {
             return Err(SceneError::new(
                 "grid.domain",
                 format!("height {} is not a whole number (≥ 2) of cells of width {h}", g.domain[1]),
+            ));
+        }
+        let nodes = (g.resolution as u64 + 5) * (ny.round() as u64 + 5);
+        if nodes > MAX_GRID_NODES {
+            return Err(SceneError::new(
+                "grid.resolution",
+                format!(
+                    "the grid would have {nodes} nodes (about {} MB); at most {MAX_GRID_NODES} are allowed",
+                    nodes * GRID_BYTES_PER_NODE / 1_000_000
+                ),
             ));
         }
         Ok(GridLayout::new(h, [g.resolution, ny.round() as usize]))
@@ -433,10 +450,13 @@ fn seed_body(
         }
     };
     let cells = ((hi - lo) / spacing).map(|c| c.ceil() as u64 + 1);
-    if cells.x.saturating_mul(cells.y) > 200_000_000 {
+    if cells.x.saturating_mul(cells.y) > MAX_SEED_CANDIDATES {
         return Err(SceneError::new(
             format!("{key}.seeding"),
-            format!("would seed about {} points; raise the spacing", cells.x * cells.y),
+            format!(
+                "would try about {} points (at most {MAX_SEED_CANDIDATES}, about 200 bytes each); raise the spacing",
+                cells.x.saturating_mul(cells.y)
+            ),
         ));
     }
     // One stream per body, so adding a body does not reshuffle the others.
