@@ -71,3 +71,14 @@ def test_console_script_is_installed(small_scene, write_scene, tmp_path):
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "frames in" in proc.stdout
+
+
+def test_rerun_into_the_same_directory_replaces_frames(small_scene, write_scene, tmp_path):
+    out = tmp_path / "again"
+    scene = str(write_scene(small_scene))
+    assert main(["run", scene, "--out", str(out), "--no-progress", "--set", "time.output_interval=5"]) == 0
+    assert len(list((out / "particles").glob("*.npz"))) == 5
+    assert main(["run", scene, "--out", str(out), "--no-progress"]) == 0
+    assert len(list((out / "particles").glob("*.npz"))) == 3
+    assert len(list((out / "frames").glob("*.png"))) == 3
+    assert len(list((out / "vtk").glob("*.vtp"))) == 3

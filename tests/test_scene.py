@@ -49,6 +49,14 @@ BAD = [
     ("both dt and cfl", "time.cfl", 0.5, "time", "exactly one of dt and cfl"),
     ("grid height not whole cells", "grid.domain", [1.0, 0.51], "grid", "whole number"),
     ("grid too large for memory", "grid.resolution", 20000, "grid.resolution", "MB"),
+    ("grid height overflows", "grid.domain", [1.0, 1e300], "grid.resolution", "MB"),
+    (
+        "wall far outside the domain",
+        "walls.0",
+        {"type": "circle", "center": [0.5, 0.5], "radius": 1e12},
+        "walls[0]",
+        "far",
+    ),
     ("seeding too dense for memory", "bodies.0.seeding", {"spacing": 1e-5}, "bodies[0].seeding", "raise the spacing"),
 ]
 
@@ -83,6 +91,13 @@ def test_unreadable_inputs_exit_2(tmp_path, capsys, write_scene, small_scene):
     assert main(["run", str(scene), "--set", "bodies[3].velocity=[1,0]"]) == 2
     assert "not an index" in capsys.readouterr().err
     assert main(["run", str(scene), "--method", "magic"]) == 2
+    binary = tmp_path / "binary.toml"
+    binary.write_bytes(b"\xff\xfe\x00garbage")
+    assert main(["run", str(binary)]) == 2
+    assert "not UTF-8" in capsys.readouterr().err
+    assert main(["run", str(scene), "--out", str(binary)]) == 2
+    assert "not a directory" in capsys.readouterr().err
+    assert main(["interp-test", "--resolution", "4"]) == 2
 
 
 def test_overrides_reach_the_scene(small_scene, write_scene):

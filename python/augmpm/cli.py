@@ -59,11 +59,17 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def _output_dir(path: Path) -> Path:
+    if path.exists() and not path.is_dir():
+        raise _core.SceneError(f"--out: {path} exists and is not a directory")
+    return path
+
+
 def _run(args: argparse.Namespace) -> int:
     if args.steps is not None and args.steps < 0:
         raise _core.SceneError(f"--steps: must be non-negative, got {args.steps}")
     scene = load_scene(args.scene, args.overrides)
-    out = args.out or Path("runs") / (scene.name or args.scene.stem)
+    out = _output_dir(args.out or Path("runs") / (scene.name or args.scene.stem))
     result = run_scene(
         scene,
         out,
@@ -94,7 +100,7 @@ def _compare(args: argparse.Namespace) -> int:
     if args.steps is not None and args.steps < 0:
         raise _core.SceneError(f"--steps: must be non-negative, got {args.steps}")
     scene = load_scene(args.scene, args.overrides)
-    out = args.out or Path("runs") / f"{scene.name or args.scene.stem}-compare"
+    out = _output_dir(args.out or Path("runs") / f"{scene.name or args.scene.stem}-compare")
     result = compare_scene(
         scene, out, steps=args.steps, progress=not args.no_progress, animation="gif" if args.gif else "mp4"
     )
@@ -110,9 +116,9 @@ def _compare(args: argparse.Namespace) -> int:
 def _interp_test(args: argparse.Namespace) -> int:
     from augmpm.interp import interpolation_test
 
-    if not 4 <= args.resolution <= 4096:
-        raise _core.SceneError(f"--resolution: must lie in [4, 4096], got {args.resolution}")
-    for r in interpolation_test(args.out, resolution=args.resolution):
+    if not 16 <= args.resolution <= 1024:
+        raise _core.SceneError(f"--resolution: must lie in [16, 1024], got {args.resolution}")
+    for r in interpolation_test(_output_dir(args.out), resolution=args.resolution):
         print(
             f"{r.method:>9}: within 2h of the wall, away from corners: "
             f"max {r.max_error:.3g} h, RMS {r.rms_error:.3g} h; "

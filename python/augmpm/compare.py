@@ -97,6 +97,8 @@ def _side_by_side(out: Path, animation: str) -> None:
         return
     joined_dir = out / "frames"
     joined_dir.mkdir(exist_ok=True)
+    for stale in joined_dir.glob("frame_*.png"):
+        stale.unlink()
     joined = []
     for i in range(n):
         images = [imageio.imread(frames[m][i])[..., :3] for m in METHODS]

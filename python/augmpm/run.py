@@ -65,6 +65,9 @@ def run_scene(
     out.mkdir(parents=True, exist_ok=True)
     for sub in ("particles", "frames", "vtk"):
         (out / sub).mkdir(exist_ok=True)
+        # Frames of an earlier run into the same directory would mix with this one's.
+        for stale in (out / sub).glob("frame_*.*"):
+            stale.unlink()
     header = (
         f"# resolved scene; method = {method}, dt = {sim.dt!r} s, cell size h = {sim.cell_size!r} m, "
         f"{sim.num_particles} particles\n"

@@ -8,11 +8,11 @@ inside the walls) is checked by the Rust core when the simulation is built.
 from __future__ import annotations
 
 import json
+import tomllib
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import tomli_w
-import tomllib
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from augmpm._core import SceneError
@@ -298,6 +298,8 @@ def load_scene(path: str | Path, overrides: list[str] | None = None) -> Scene:
         text = path.read_text(encoding="utf-8")
     except OSError as e:
         raise _plain_error(str(path), f"cannot read scene file ({e.strerror})") from None
+    except UnicodeDecodeError as e:
+        raise _plain_error(str(path), f"scene file is not UTF-8 text ({e.reason} at byte {e.start})") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

@@ -27,50 +27,6 @@ impl<const D: usize> BoundaryPoint<D> {
     }
 }
 
-/// Applies a wall condition at a boundary point with normals `normals` (unit).
-/// Full slip removes the velocity component (relative to the wall) along both
-/// normals at once, by projecting onto the orthogonal complement of their span,
-/// so a corner of any angle is satisfied exactly.
-pub fn project_boundary<const D: usize>(
-    condition: WallCondition,
-    v: Vector<D>,
-    normals: &[Vector<D>; 2],
-    wall_v: &Vector<D>,
-) -> Vector<D> {
-    let rel = v - wall_v;
-    // Orthonormal basis of span{n0, n1}.
-    let e0 = normals[0];
-    let r = normals[1] - e0 * normals[1].dot(&e0);
-    let e1 = (r.norm() > 1e-9).then(|| r.normalize());
-    let remove = |u: Vector<D>, e: &Vector<D>| u - e * u.dot(e);
-    let out = match condition {
-        WallCondition::Sticky => Vector::<D>::zeros(),
-        WallCondition::Slip => {
-            let u = remove(rel, &e0);
-            e1.map_or(u, |e1| remove(u, &e1))
-        }
-        WallCondition::Separate => {
-            // Active set: remove the components along the normals the velocity points into.
-            let into: Vec<&Vector<D>> = normals.iter().filter(|n| rel.dot(n) > 0.0).collect();
-            match (into.len(), e1) {
-                (0, _) => rel,
-                (_, None) => remove(rel, &e0),
-                (1, Some(_)) => {
-                    let u = remove(rel, &into[0].normalize());
-                    let other = if std::ptr::eq(into[0], &normals[0]) { &normals[1] } else { &normals[0] };
-                    if u.dot(other) > 0.0 {
-                        remove(remove(rel, &e0), &e1.unwrap())
-                    } else {
-                        u
-                    }
-                }
-                _ => remove(remove(rel, &e0), &e1.unwrap()),
-            }
-        }
-    };
-    out + wall_v
-}
-
 /// Most boundary points remembered per particle between the stages of a step;
 /// a particle that sees more (dense sampling, sharp corners) looks them up again.
 pub const MAX_NEAR: usize = 12;
@@ -314,48 +270,10 @@ impl<const D: usize> AugmentedGrid<D> {
             let i = base + b;
             let motion = &self.walls[p.wall];
             velocity[i] = if mass[i] != 0.0 || motion.condition == WallCondition::Sticky {
-                project_boundary(motion.condition, velocity[i], &p.normals, &motion.velocity)
+                motion.condition.apply_at(velocity[i], &p.normals, &motion.velocity)
             } else {
-                motion.velocity
+                motion.condition.apply_at(motion.velocity, &p.normals, &motion.velocity)
             };
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use nalgebra::Vector2;
-
-    /// Full slip at a 60° corner leaves no component along either normal (sequential
-    /// projection would leave one); a velocity tangent to a straight wall passes unchanged.
-    #[test]
-    fn slip_satisfies_both_normals_at_a_corner() {
-        let n0 = Vector2::new(0.0, -1.0);
-        let a = 60f64.to_radians();
-        let n1 = Vector2::new(a.sin(), -a.cos());
-        let v = Vector2::new(0.7, -1.3);
-        let still = Vector2::zeros();
-        let out = project_boundary(WallCondition::Slip, v, &[n0, n1], &still);
-        assert!(out.dot(&n0).abs() < 1e-15 && out.dot(&n1).abs() < 1e-15);
-        // The authors' sequential projection leaves a component into the first wall.
-        let seq = {
-            let u = v - n0 * v.dot(&n0);
-            u - n1 * u.dot(&n1)
-        };
-        assert!(seq.dot(&n0).abs() > 0.1);
-        let tangent = Vector2::new(2.0, 0.0);
-        assert_eq!(project_boundary(WallCondition::Slip, tangent, &[n0, n0], &still), tangent);
-    }
-
-    #[test]
-    fn sticky_takes_wall_velocity_and_separate_lets_go() {
-        let n = Vector2::new(0.0, -1.0);
-        let belt = Vector2::new(1.5, 0.0);
-        assert_eq!(project_boundary(WallCondition::Sticky, Vector2::new(3.0, -2.0), &[n, n], &belt), belt);
-        let away = Vector2::new(1.0, 2.0);
-        assert_eq!(project_boundary(WallCondition::Separate, away, &[n, n], &Vector2::zeros()), away);
-        let into = Vector2::new(1.0, -2.0);
-        assert_eq!(project_boundary(WallCondition::Separate, into, &[n, n], &Vector2::zeros()), Vector2::new(1.0, 0.0));
     }
 }

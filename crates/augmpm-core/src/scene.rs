@@ -253,8 +253,10 @@ impl Scene {
                 format!("height {} is not a whole number (≥ 2) of cells of width {h}", g.domain[1]),
             ));
         }
-        let nodes = (g.resolution as u64 + 5) * (ny.round() as u64 + 5);
-        if nodes > MAX_GRID_NODES {
+        // In floating point first: a huge height must not wrap an integer cast.
+        let nodes_f = (g.resolution as Real + 5.0) * (ny.round() + 5.0);
+        let nodes = nodes_f.min(u64::MAX as Real) as u64;
+        if nodes_f > MAX_GRID_NODES as Real {
             return Err(SceneError::new(
                 "grid.resolution",
                 format!(
@@ -271,9 +273,16 @@ impl Scene {
         let mut motions = Vec::new();
         for (i, w) in self.walls.iter().enumerate() {
             let key = format!("walls[{i}]");
+            // Walls are sampled (augmented grid) and classified against the grid: keep them
+            // within one domain size of the box.
+            let near_box = |p: &Point| (0..2).all(|k| p[k] >= -extent[k] && p[k] <= 2.0 * extent[k]);
+            let far = || SceneError::new(&key, "wall lies far outside the domain box (more than one domain size away)");
             let (shape, condition, velocity) = match w {
                 WallSpec::Polygon { vertices, condition, velocity } => {
                     let poly = checked_polygon(&format!("{key}.vertices"), vertices.iter().map(point).collect())?;
+                    if !poly.vertices.iter().all(near_box) {
+                        return Err(far());
+                    }
                     (WallShape::Polygon(poly), condition, velocity)
                 }
                 WallSpec::Circle { center, radius, side, condition, velocity } => {
@@ -283,6 +292,10 @@ impl Scene {
                             format!("{key}.radius"),
                             format!("must be positive, got {radius}"),
                         ));
+                    }
+                    let r = Point::repeat(*radius);
+                    if !(near_box(&(point(center) - r)) && near_box(&(point(center) + r))) {
+                        return Err(far());
                     }
                     let side = match side {
                         SideSpec::Outside => Side::Outside,
@@ -322,7 +335,14 @@ impl Scene {
                 if !(cfl.is_finite() && cfl > 0.0 && cfl <= 1.0) {
                     return Err(SceneError::new("time.cfl", format!("must lie in (0, 1], got {cfl}")));
                 }
-                Ok((cfl * model_stable_dt, None))
+                let dt = cfl * model_stable_dt;
+                if !(dt.is_finite() && dt > 0.0) {
+                    return Err(SceneError::new(
+                        "time.cfl",
+                        format!("the materials' stable step is {model_stable_dt:e} s; give time.dt instead"),
+                    ));
+                }
+                Ok((dt, None))
             }
             (Some(_), Some(_)) => Err(SceneError::new("time", "give either dt or cfl, not both")),
             (None, None) => Err(SceneError::new("time", "give dt or cfl")),
@@ -449,16 +469,18 @@ fn seed_body(
             (area, circle.center - r, circle.center + r, Box::new(move |p| circle.contains(p)))
         }
     };
-    let cells = ((hi - lo) / spacing).map(|c| c.ceil() as u64 + 1);
-    if cells.x.saturating_mul(cells.y) > MAX_SEED_CANDIDATES {
+    // In floating point first: a tiny spacing must not wrap an integer cast.
+    let cells_f = ((hi - lo) / spacing).map(|c| c.ceil() + 1.0);
+    if cells_f.x * cells_f.y > MAX_SEED_CANDIDATES as Real {
         return Err(SceneError::new(
             format!("{key}.seeding"),
             format!(
-                "would try about {} points (at most {MAX_SEED_CANDIDATES}, about 200 bytes each); raise the spacing",
-                cells.x.saturating_mul(cells.y)
+                "would try about {:.3e} points (at most {MAX_SEED_CANDIDATES}, about 200 bytes each); raise the spacing",
+                cells_f.x * cells_f.y
             ),
         ));
     }
+    let cells = cells_f.map(|c| c as u64);
     // One stream per body, so adding a body does not reshuffle the others.
     let mut rng = Pcg64::seed_from_u64(seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
     let first = (lo / spacing).map(|c| c.floor() as i64);
