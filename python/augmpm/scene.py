@@ -70,6 +70,8 @@ class PolygonWall(_Strict):
     vertices: Annotated[list[FiniteVec2], Field(min_length=3)]
     condition: WallCondition | None = None
     velocity: FiniteVec2 = (0.0, 0.0)
+    #: Surface speed (m/s) counter-clockwise along the polygon: a belt loop.
+    tangential_speed: FiniteFloat = 0.0
 
 
 class CircleWall(_Strict):
@@ -81,6 +83,8 @@ class CircleWall(_Strict):
     side: Literal["outside", "inside"] = "outside"
     condition: WallCondition | None = None
     velocity: FiniteVec2 = (0.0, 0.0)
+    #: Surface speed (m/s) counter-clockwise around the centre: a spinning cylinder.
+    tangential_speed: FiniteFloat = 0.0
 
 
 Wall = Annotated[PolygonWall | CircleWall, Field(discriminator="type")]

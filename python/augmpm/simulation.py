@@ -55,6 +55,11 @@ class Simulation:
         return self._sim.masses
 
     @property
+    def densities(self) -> np.ndarray:
+        """Fluid density of each particle from the regular grid in the last step (kg/m² in 2D), shape (N,)."""
+        return self._sim.densities
+
+    @property
     def num_particles(self) -> int:
         return self._sim.num_particles
 

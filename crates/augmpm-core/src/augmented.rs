@@ -3,7 +3,7 @@
 //! material, and every particle solves its own MLS system (eq. (3)–(6)) over
 //! the included nodes and boundary points in its B-spline support.
 
-use crate::boundary::{WallCondition, WallMotion};
+use crate::boundary::WallCondition;
 use crate::geometry::Region;
 use crate::grid::GridLayout;
 use crate::kernel::{weight, MlsInverse, MlsKind, Moments, Stencil};
@@ -19,11 +19,14 @@ pub struct BoundaryPoint<const D: usize> {
     pub normals: [Vector<D>; 2],
     /// Index of the wall it was sampled on.
     pub wall: usize,
+    /// Velocity of the wall surface there (m/s); only its tangential part acts.
+    pub velocity: Vector<D>,
 }
 
 impl<const D: usize> BoundaryPoint<D> {
+    /// A point of a still wall.
     pub fn new(x: Vector<D>, n0: Vector<D>, n1: Vector<D>, wall: usize) -> Self {
-        Self { x, normals: [n0, n1], wall }
+        Self { x, normals: [n0, n1], wall, velocity: Vector::<D>::zeros() }
     }
 }
 
@@ -65,7 +68,8 @@ pub struct AugmentedGrid<const D: usize> {
     /// Boundary points by cell (cell = node at its lower corner): `cell_points[cell_start[c]..cell_start[c + 1]]`.
     cell_start: Vec<u32>,
     cell_points: Vec<u32>,
-    pub walls: Vec<WallMotion<D>>,
+    /// Condition of each wall.
+    pub walls: Vec<WallCondition>,
     /// Exclusion distance δ (m).
     pub delta: Real,
 }
@@ -75,7 +79,7 @@ impl<const D: usize> AugmentedGrid<D> {
         layout: &GridLayout<D>,
         region: &dyn Region<D>,
         points: Vec<BoundaryPoint<D>>,
-        walls: Vec<WallMotion<D>>,
+        walls: Vec<WallCondition>,
         delta: Real,
     ) -> Self {
         let n = layout.num_nodes();
@@ -268,12 +272,10 @@ impl<const D: usize> AugmentedGrid<D> {
         let base = self.num_nodes();
         for (b, p) in self.points.iter().enumerate() {
             let i = base + b;
-            let motion = &self.walls[p.wall];
-            velocity[i] = if mass[i] != 0.0 || motion.condition == WallCondition::Sticky {
-                motion.condition.apply_at(velocity[i], &p.normals, &motion.velocity)
-            } else {
-                motion.condition.apply_at(motion.velocity, &p.normals, &motion.velocity)
-            };
+            let condition = self.walls[p.wall];
+            // A point no particle gave mass to moves with the wall.
+            let v = if mass[i] != 0.0 { velocity[i] } else { p.velocity };
+            velocity[i] = condition.apply_at(v, &p.normals, &p.velocity);
         }
     }
 }

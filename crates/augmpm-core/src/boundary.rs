@@ -69,20 +69,14 @@ impl WallCondition {
     }
 }
 
-/// Condition and (tangential) velocity of one wall.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct WallMotion<const D: usize> {
-    pub condition: WallCondition,
-    /// Velocity of the wall surface (m/s).
-    pub velocity: Vector<D>,
-}
-
 /// A grid node on the wall side of the region, with the condition it gets.
 #[derive(Clone, Copy, Debug)]
 pub struct WallNode<const D: usize> {
     pub node: usize,
     pub normal: Vector<D>,
     pub wall: usize,
+    /// Velocity of the wall surface there (m/s); only its tangential part acts.
+    pub velocity: Vector<D>,
 }
 
 /// The classic MLS-MPM boundary: every grid node outside the material region
@@ -90,16 +84,29 @@ pub struct WallNode<const D: usize> {
 #[derive(Clone, Debug)]
 pub struct NaiveBoundary<const D: usize> {
     pub nodes: Vec<WallNode<D>>,
-    pub walls: Vec<WallMotion<D>>,
+    /// Condition of each wall.
+    pub walls: Vec<WallCondition>,
 }
 
 impl<const D: usize> NaiveBoundary<D> {
-    /// Classifies every node of `layout` against `region` once; walls do not move.
-    pub fn new(layout: &GridLayout<D>, region: &dyn Region<D>, walls: Vec<WallMotion<D>>) -> Self {
+    /// Classifies every node of `layout` against `region` once (wall geometry does not move);
+    /// `surface_velocity(wall, x, normal)` gives the wall surface's velocity near `x`.
+    pub fn new(
+        layout: &GridLayout<D>,
+        region: &dyn Region<D>,
+        walls: Vec<WallCondition>,
+        surface_velocity: impl Fn(usize, &Vector<D>, &Vector<D>) -> Vector<D>,
+    ) -> Self {
         let nodes = (0..layout.num_nodes())
             .filter_map(|node| {
-                let d = region.distance(&layout.position(node));
-                (d.distance >= 0.0).then_some(WallNode { node, normal: d.normal, wall: d.wall })
+                let x = layout.position(node);
+                let d = region.distance(&x);
+                (d.distance >= 0.0).then(|| WallNode {
+                    node,
+                    normal: d.normal,
+                    wall: d.wall,
+                    velocity: surface_velocity(d.wall, &x, &d.normal),
+                })
             })
             .collect();
         Self { nodes, walls }
@@ -109,8 +116,7 @@ impl<const D: usize> NaiveBoundary<D> {
     pub fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>]) {
         for w in &self.nodes {
             if mass[w.node] > 0.0 {
-                let m = &self.walls[w.wall];
-                velocity[w.node] = m.condition.apply(velocity[w.node], &w.normal, &m.velocity);
+                velocity[w.node] = self.walls[w.wall].apply(velocity[w.node], &w.normal, &w.velocity);
             }
         }
     }

@@ -2,7 +2,7 @@
 //! simulation is built from it: validation, walls, particle seeding.
 
 use crate::augmented::AugmentedGrid;
-use crate::boundary::{Method, NaiveBoundary, WallCondition, WallMotion};
+use crate::boundary::{Method, NaiveBoundary, WallCondition};
 use crate::geometry::{Circle, Point, Polygon, Region, Side, WallShape, Walls2};
 use crate::grid::GridLayout;
 use crate::material::Material;
@@ -59,8 +59,12 @@ pub enum WallSpec {
         vertices: Vec<[Real; 2]>,
         #[serde(default)]
         condition: Option<WallCondition>,
+        /// Velocity of the wall surface (m/s); only its part along the wall acts.
         #[serde(default)]
         velocity: [Real; 2],
+        /// Speed (m/s) of the surface along the polygon, counter-clockwise (a belt loop).
+        #[serde(default)]
+        tangential_speed: Real,
     },
     /// Circle, material `outside` (an obstacle, the default) or `inside` (a container).
     Circle {
@@ -72,6 +76,9 @@ pub enum WallSpec {
         condition: Option<WallCondition>,
         #[serde(default)]
         velocity: [Real; 2],
+        /// Surface speed (m/s) counter-clockwise around the centre (a spinning cylinder).
+        #[serde(default)]
+        tangential_speed: Real,
     },
 }
 
@@ -192,6 +199,36 @@ const GRID_BYTES_PER_NODE: u64 = 48;
 /// Largest number of jittered candidate points per body: 20 M particles need about 4 GB.
 const MAX_SEED_CANDIDATES: u64 = 20_000_000;
 
+/// How the surface of one wall moves (its geometry stays still).
+#[derive(Clone, Copy, Debug)]
+struct SurfaceMotion {
+    velocity: Point,
+    /// Speed along the wall: counter-clockwise along a polygon, or around a circle's centre.
+    tangential_speed: Real,
+    /// Centre of a circular wall.
+    center: Option<Point>,
+}
+
+impl SurfaceMotion {
+    /// Surface velocity (m/s) near `x`, where the wall's outward normal is `n`.
+    fn at(&self, x: &Point, n: &Point) -> Point {
+        let tangent = match self.center {
+            Some(c) => {
+                let r = x - c;
+                let norm = r.norm();
+                if norm > 0.0 {
+                    Point::new(-r.y, r.x) / norm
+                } else {
+                    Point::zeros()
+                }
+            }
+            // Counter-clockwise along a polygon whose material is inside: the normal turned left.
+            None => Point::new(-n.y, n.x),
+        };
+        self.velocity + tangent * self.tangential_speed
+    }
+}
+
 fn point(p: &[Real; 2]) -> Point {
     Point::new(p[0], p[1])
 }
@@ -268,8 +305,10 @@ impl Scene {
         Ok(GridLayout::new(h, [g.resolution, ny.round() as usize]))
     }
 
-    fn walls(&self, extent: Point) -> Result<(Walls2, Vec<WallMotion<2>>), SceneError> {
+    /// The walls, each wall's condition (the domain box last) and each wall's surface motion.
+    fn walls(&self, extent: Point) -> Result<(Walls2, Vec<WallCondition>, Vec<SurfaceMotion>), SceneError> {
         let mut shapes = Vec::new();
+        let mut conditions = Vec::new();
         let mut motions = Vec::new();
         for (i, w) in self.walls.iter().enumerate() {
             let key = format!("walls[{i}]");
@@ -278,14 +317,14 @@ impl Scene {
             let near_box = |p: &Point| (0..2).all(|k| p[k] >= -extent[k] && p[k] <= 2.0 * extent[k]);
             let far = || SceneError::new(&key, "wall lies far outside the domain box (more than one domain size away)");
             let (shape, condition, velocity) = match w {
-                WallSpec::Polygon { vertices, condition, velocity } => {
+                WallSpec::Polygon { vertices, condition, velocity, tangential_speed } => {
                     let poly = checked_polygon(&format!("{key}.vertices"), vertices.iter().map(point).collect())?;
                     if !poly.vertices.iter().all(near_box) {
                         return Err(far());
                     }
-                    (WallShape::Polygon(poly), condition, velocity)
+                    (WallShape::Polygon(poly), condition, (velocity, tangential_speed, None))
                 }
-                WallSpec::Circle { center, radius, side, condition, velocity } => {
+                WallSpec::Circle { center, radius, side, condition, velocity, tangential_speed } => {
                     finite(&format!("{key}.center"), center)?;
                     if !(radius.is_finite() && *radius > 0.0) {
                         return Err(SceneError::new(
@@ -301,16 +340,21 @@ impl Scene {
                         SideSpec::Outside => Side::Outside,
                         SideSpec::Inside => Side::Inside,
                     };
-                    (WallShape::Circle(Circle { center: point(center), radius: *radius }, side), condition, velocity)
+                    let circle = Circle { center: point(center), radius: *radius };
+                    (WallShape::Circle(circle, side), condition, (velocity, tangential_speed, Some(point(center))))
                 }
             };
+            let (velocity, speed, center) = velocity;
             finite(&format!("{key}.velocity"), velocity)?;
+            finite(&format!("{key}.tangential_speed"), &[*speed])?;
             shapes.push(shape);
-            motions.push(WallMotion { condition: condition.unwrap_or(self.wall_condition), velocity: point(velocity) });
+            conditions.push(condition.unwrap_or(self.wall_condition));
+            motions.push(SurfaceMotion { velocity: point(velocity), tangential_speed: *speed, center });
         }
         // The domain box, always a wall, still.
-        motions.push(WallMotion { condition: self.wall_condition, velocity: Point::zeros() });
-        Ok((Walls2::new(shapes, extent), motions))
+        conditions.push(self.wall_condition);
+        motions.push(SurfaceMotion { velocity: Point::zeros(), tangential_speed: 0.0, center: None });
+        Ok((Walls2::new(shapes, extent), conditions, motions))
     }
 
     fn dt(&self, model_stable_dt: Real) -> Result<(Real, Option<String>), SceneError> {
@@ -354,9 +398,10 @@ impl Scene {
         let layout = self.layout()?;
         let h = layout.h;
         let extent = Point::new(layout.extent()[0], layout.extent()[1]);
-        let (region, motions) = self.walls(extent)?;
+        let (region, conditions, motions) = self.walls(extent)?;
+        let surface = |wall: usize, x: &Point, n: &Point| motions[wall].at(x, n);
         let boundary = match method {
-            Method::Naive => Boundary::Naive(NaiveBoundary::new(&layout, &region, motions)),
+            Method::Naive => Boundary::Naive(NaiveBoundary::new(&layout, &region, conditions, surface)),
             Method::Augmented => {
                 let delta = self.augmented.delta;
                 if !(delta.is_finite() && (0.0..1.5).contains(&delta)) {
@@ -372,8 +417,11 @@ impl Scene {
                         format!("must lie in (0.05, 1] cell widths, got {spacing}"),
                     ));
                 }
-                let points = region.boundary_points(spacing * h);
-                Boundary::Augmented(AugmentedGrid::new(&layout, &region, points, motions, delta * h))
+                let mut points = region.boundary_points(spacing * h);
+                for p in &mut points {
+                    p.velocity = surface(p.wall, &p.x, &p.normals[0]);
+                }
+                Boundary::Augmented(AugmentedGrid::new(&layout, &region, points, conditions, delta * h))
             }
         };
         Ok((layout, region, boundary))
@@ -508,4 +556,22 @@ fn seed_body(
         out.push(p, v, mass, vol0, index as u32, index as u32);
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A belt loop runs counter-clockwise along its polygon (+x on the floor, −x on the ceiling);
+    /// a spinning circle runs counter-clockwise around its centre.
+    #[test]
+    fn tangential_speed_runs_counter_clockwise() {
+        let belt = SurfaceMotion { velocity: Point::zeros(), tangential_speed: 2.0, center: None };
+        assert_eq!(belt.at(&Point::new(0.5, 0.0), &Point::new(0.0, -1.0)), Point::new(2.0, 0.0));
+        assert_eq!(belt.at(&Point::new(0.5, 1.0), &Point::new(0.0, 1.0)), Point::new(-2.0, 0.0));
+        let spin =
+            SurfaceMotion { velocity: Point::zeros(), tangential_speed: 3.0, center: Some(Point::new(0.5, 0.5)) };
+        let v = spin.at(&Point::new(0.7, 0.5), &Point::new(-1.0, 0.0));
+        assert!((v - Point::new(0.0, 3.0)).norm() < 1e-15);
+    }
 }

@@ -186,6 +186,12 @@ where
         (0..n).try_for_each(|_| self.step())
     }
 
+    /// Density (kg/m³, or kg/m² in 2D) of each particle as gathered from the regular grid in
+    /// the last step; only for models that use it (fluids), zero before the first step.
+    pub fn grid_density(&self) -> &[Real] {
+        &self.scratch.density
+    }
+
     /// Kinetic energy and wall penetration of the current state.
     pub fn metrics(&self) -> Metrics {
         let region = self.model.region.as_ref();

@@ -2,7 +2,7 @@
 //! which the naive grid (wall nodes holding the wall value) cannot.
 
 use augmpm_core::augmented::AugmentedGrid;
-use augmpm_core::boundary::{WallCondition, WallMotion};
+use augmpm_core::boundary::WallCondition;
 use augmpm_core::geometry::{Point, Polygon, Region, WallShape, Walls2};
 use augmpm_core::grid::GridLayout;
 use augmpm_core::kernel::{MlsKind, Stencil};
@@ -18,9 +18,14 @@ fn tilted_container(angle: f64, y0: f64) -> Walls2 {
 }
 
 fn augmented(walls: &Walls2, layout: &GridLayout<2>, delta_cells: f64) -> AugmentedGrid<2> {
-    let still = WallMotion { condition: WallCondition::Sticky, velocity: Point::zeros() };
     let points = walls.boundary_points(layout.h);
-    AugmentedGrid::new(layout, walls, points, vec![still; walls.walls.len() + 1], delta_cells * layout.h)
+    AugmentedGrid::new(
+        layout,
+        walls,
+        points,
+        vec![WallCondition::Sticky; walls.walls.len() + 1],
+        delta_cells * layout.h,
+    )
 }
 
 /// Values of `f` at every grid point (nodes, then boundary points); NaN on excluded nodes, so

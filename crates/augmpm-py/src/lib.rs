@@ -100,6 +100,12 @@ impl PySimulation {
         PyArray1::from_slice(py, &self.sim.particles.mass)
     }
 
+    /// Fluid density of each particle gathered from the regular grid in the last step (kg/m²), shape (N,).
+    #[getter]
+    fn densities<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, self.sim.grid_density())
+    }
+
     #[getter]
     fn num_particles(&self) -> usize {
         self.sim.particles.len()
