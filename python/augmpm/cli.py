@@ -53,6 +53,11 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--gif", action="store_true", help="write comparison.gif instead of comparison.mp4")
     c.add_argument("--no-progress", action="store_true", help="hide the progress bars")
 
+    v = sub.add_parser("validate", help="run the validation suite (analytic flows, experiments) and write a report")
+    v.add_argument("--quick", action="store_true", help="coarse and short (a few minutes on 2 cores)")
+    v.add_argument("--out", type=Path, default=Path("runs/validation"), help="output directory")
+    v.add_argument("--no-progress", action="store_true", help="do not print progress")
+
     i = sub.add_parser("interp-test", help="the paper's Fig. 4 interpolation test (naive vs augmented)")
     i.add_argument("--out", type=Path, default=Path("runs/interp-test"), help="output directory")
     i.add_argument("--resolution", type=int, default=30, help="cells per side (default 30, as in the paper)")
@@ -113,6 +118,19 @@ def _compare(args: argparse.Namespace) -> int:
     return EXIT_FAILED_RUN if failed else EXIT_OK
 
 
+def _validate(args: argparse.Namespace) -> int:
+    from augmpm.validation.suite import all_augmented_pass, run_validation
+
+    out = _output_dir(args.out)
+    records = run_validation(out, quick=args.quick, progress=not args.no_progress)
+    judged = [r for r in records if r.method == "augmented" and r.passed is not None]
+    failed = [r for r in judged if not r.passed]
+    print(f"augmented: {len(judged) - len(failed)} of {len(judged)} judged metrics pass; report in {out / 'report.md'}")
+    for r in failed:
+        print(f"  not met: {r.case} {r.angle_deg:g}° {r.metric} = {r.value:.4g} (tolerance {r.tolerance:g})")
+    return EXIT_OK if all_augmented_pass(records) else EXIT_FAILED_RUN
+
+
 def _interp_test(args: argparse.Namespace) -> int:
     from augmpm.interp import interpolation_test
 
@@ -140,6 +158,8 @@ def main(argv: list[str] | None = None) -> int:
             return _compare(args)
         if args.command == "interp-test":
             return _interp_test(args)
+        if args.command == "validate":
+            return _validate(args)
     except _core.SceneError as e:
         print(f"augmpm: bad input: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
