@@ -30,6 +30,7 @@ METRIC_COLUMNS = [
     "max_penetration",
     "ill_conditioned",
     "low_mass_nodes",
+    "held_at_wall",
 ]
 
 

@@ -33,6 +33,8 @@ class Grid(_Strict):
 
     domain: tuple[PositiveFloat, PositiveFloat]
     resolution: Annotated[int, Field(ge=2, le=65536)]
+    #: Correct the fluid density gathered next to walls for the part of the kernel in the wall.
+    density_wall_correction: bool = False
 
     @property
     def cell_size(self) -> float:

@@ -34,6 +34,10 @@ pub struct GridSpec {
     pub domain: [Real; 2],
     /// Cells along x; h = Lx / resolution and Ly must be a whole number of cells.
     pub resolution: usize,
+    /// Correct the fluid density gathered next to walls for the part of the kernel that lies
+    /// in the wall (off by default, as in the paper).
+    #[serde(default)]
+    pub density_wall_correction: bool,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -452,8 +456,18 @@ impl Scene {
                 ));
             }
         }
-        let mut model =
-            Model { layout, materials, gravity: point(&self.gravity), region: Box::new(region), boundary, dt: 0.0 };
+        let wall_fraction = (self.grid.density_wall_correction
+            && materials.iter().any(crate::material::ConstitutiveModel::<2>::needs_grid_density))
+        .then(|| crate::transfer::wall_fractions(&layout, &region));
+        let mut model = Model {
+            layout,
+            materials,
+            gravity: point(&self.gravity),
+            region: Box::new(region),
+            boundary,
+            wall_fraction,
+            dt: 0.0,
+        };
         let (dt, warning) = self.dt(model.stable_dt())?;
         model.dt = dt;
         Ok((Simulation::new(model, particles), warning.into_iter().collect()))

@@ -39,6 +39,9 @@ pub struct Model<const D: usize> {
     /// The material region and its walls.
     pub region: Box<dyn Region<D>>,
     pub boundary: Boundary<D>,
+    /// Per node, the part of its support inside the material, when the fluid density is
+    /// corrected next to walls (see [`transfer::gather_density`]).
+    pub wall_fraction: Option<Vec<Real>>,
     /// Time step (s).
     pub dt: Real,
 }
@@ -78,6 +81,8 @@ struct Scratch<const D: usize> {
     minv: Vec<MlsInverse<D>>,
     kind: Vec<MlsKind>,
     near: Vec<NearPoints>,
+    /// Whether each particle's MLS system saw a wall this step (not the closed form).
+    at_wall: Vec<bool>,
 }
 
 /// Diagnostics of the current state.
@@ -96,6 +101,8 @@ pub struct Metrics {
     pub ill_conditioned: u64,
     /// Node-steps so far whose MLS mass was below [`transfer::LOW_MASS_FRACTION`] of its absolute mass.
     pub low_mass_nodes: u64,
+    /// Particle-steps so far in which a particle past a wall was kept from moving deeper (augmented grid).
+    pub held_at_wall: u64,
 }
 
 /// A running simulation: the model, the particles and the clock.
@@ -108,6 +115,7 @@ pub struct Simulation<const D: usize> {
     pub time: Real,
     ill_conditioned: u64,
     low_mass_nodes: u64,
+    held_at_wall: u64,
     scratch: Scratch<D>,
 }
 
@@ -124,8 +132,9 @@ where
             minv: vec![MlsInverse::regular(model.layout.h); n],
             kind: vec![MlsKind::Regular; n],
             near: vec![NearPoints::NONE; n],
+            at_wall: vec![false; n],
         };
-        Self { model, particles, step: 0, time: 0.0, ill_conditioned: 0, low_mass_nodes: 0, scratch }
+        Self { model, particles, step: 0, time: 0.0, ill_conditioned: 0, low_mass_nodes: 0, held_at_wall: 0, scratch }
     }
 
     /// One explicit MLS-MPM step: (density) → stress → (MLS inverses) → P2G →
@@ -139,7 +148,8 @@ where
 
         if model.needs_grid_density() {
             transfer::scatter_mass(layout, &particles.x, &particles.mass, &mut scratch.grid.mass).map_err(left)?;
-            transfer::gather_density(layout, &particles.x, &scratch.grid.mass, &mut scratch.density);
+            let fractions = model.wall_fraction.as_deref();
+            transfer::gather_density(layout, &particles.x, &scratch.grid.mass, fractions, &mut scratch.density);
         }
         transfer::compute_stress(&model.materials, particles, &scratch.density, &mut scratch.stress);
         let low_mass = match &model.boundary {
@@ -166,8 +176,17 @@ where
                     scratch.kind.iter().filter(|k| matches!(k, MlsKind::Regularized | MlsKind::Isolated)).count()
                         as u64;
                 let nbh = AugmentedStencil { layout, grid, minv: &scratch.minv, near: &scratch.near };
-                transfer_momentum(&nbh, model, particles, &scratch.stress, &mut scratch.grid, |m, v| grid.apply(m, v))
-                    .map_err(left)?
+                let low = transfer_momentum(&nbh, model, particles, &scratch.stress, &mut scratch.grid, |m, v| {
+                    grid.apply(m, v)
+                })
+                .map_err(left)?;
+                for (at_wall, kind) in scratch.at_wall.iter_mut().zip(&scratch.kind) {
+                    *at_wall = *kind != MlsKind::Regular;
+                }
+                self.held_at_wall +=
+                    transfer::hold_at_walls(model.region.as_ref(), &scratch.at_wall, &particles.x, &mut particles.v)
+                        as u64;
+                low
             }
         };
         self.low_mass_nodes += low_mass as u64;
@@ -211,6 +230,7 @@ where
             max_penetration: deepest / self.model.layout.h,
             ill_conditioned: self.ill_conditioned,
             low_mass_nodes: self.low_mass_nodes,
+            held_at_wall: self.held_at_wall,
         }
     }
 }

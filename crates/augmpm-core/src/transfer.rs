@@ -43,10 +43,16 @@ pub fn scatter_mass<const D: usize>(
 }
 
 /// Gathers the density of each particle, ρ_p = Σ_i w_ip m_i / h^D.
+///
+/// With `wall_fraction` (the part f_i of each node's B-spline support that lies inside the
+/// material region, see [`wall_fractions`]), node densities are `m_i / (h^D f_i)`, nodes with
+/// f_i < [`MIN_WALL_FRACTION`] are skipped and the weights renormalized: a fluid at rest density
+/// next to a wall then reads ρ0 instead of the truncated kernel's ~0.9 ρ0.
 pub fn gather_density<const D: usize>(
     layout: &GridLayout<D>,
     x: &[Vector<D>],
     grid_mass: &[Real],
+    wall_fraction: Option<&[Real]>,
     density: &mut [Real],
 ) {
     let inv_cell_volume = layout.h.powi(-(D as i32));
@@ -54,10 +60,62 @@ pub fn gather_density<const D: usize>(
         let s = Stencil::new(xp, 1.0 / layout.h);
         // Stencils were checked by scatter_mass on the same positions.
         let origin = layout.stencil_origin(&s.base).expect("stencil checked by scatter_mass");
-        let mut sum = 0.0;
-        s.for_each(layout.h, |o, w, _| sum += w * grid_mass[origin + layout.offset(&o)]);
-        *rho = sum * inv_cell_volume;
+        let (mut sum, mut weight) = (0.0, 0.0);
+        s.for_each(layout.h, |o, w, _| {
+            let i = origin + layout.offset(&o);
+            match wall_fraction {
+                None => sum += w * grid_mass[i],
+                Some(f) if f[i] >= MIN_WALL_FRACTION => {
+                    sum += w * grid_mass[i] / f[i];
+                    weight += w;
+                }
+                Some(_) => {}
+            }
+        });
+        *rho = match wall_fraction {
+            None => sum * inv_cell_volume,
+            Some(_) if weight > 0.0 => sum / weight * inv_cell_volume,
+            Some(_) => 0.0,
+        };
     });
+}
+
+/// Nodes whose support lies less than this much inside the material are left out of the density.
+pub const MIN_WALL_FRACTION: Real = 0.3;
+
+/// The fraction of each node's B-spline support inside `region`: ∫ w_i χ dx / h^D, by
+/// sampling the support at h/8 (1 far inside, 0 far outside; computed once, walls are still).
+pub fn wall_fractions<const D: usize>(layout: &GridLayout<D>, region: &dyn crate::geometry::Region<D>) -> Vec<Real> {
+    const SUB: usize = 8;
+    let h = layout.h;
+    let per_axis = 3 * SUB;
+    let total = per_axis.pow(D as u32);
+    (0..layout.num_nodes())
+        .into_par_iter()
+        .map(|i| {
+            let xi = layout.position(i);
+            let d = region.distance(&xi).distance;
+            if d < -2.0 * h {
+                return 1.0;
+            }
+            if d > 2.0 * h {
+                return 0.0;
+            }
+            let mut inside = 0.0;
+            for k in 0..total {
+                let mut r = k;
+                let mut offset = Vector::<D>::zeros();
+                for a in 0..D {
+                    offset[a] = ((r % per_axis) as Real + 0.5) / SUB as Real - 1.5;
+                    r /= per_axis;
+                }
+                if region.distance(&(xi + offset * h)).distance < 0.0 {
+                    inside += offset.iter().map(|&u| crate::kernel::bspline(u)).product::<Real>();
+                }
+            }
+            inside / (SUB as Real).powi(D as i32)
+        })
+        .collect()
 }
 
 /// Computes `V_p σ_p` of every particle with its material.
@@ -205,6 +263,35 @@ pub fn g2p<const D: usize>(
     });
 }
 
+/// A particle that has crossed a wall (its MLS fit then extrapolates, and left alone it can run
+/// away) loses the part of its velocity that would carry it deeper, `v −= n·max(v·n, 0)`, whatever
+/// the wall's condition; moving back out is free. Only particles near walls (`near[p]`) are
+/// checked. Returns how many were held.
+pub fn hold_at_walls<const D: usize>(
+    region: &dyn crate::geometry::Region<D>,
+    near: &[bool],
+    x: &[Vector<D>],
+    v: &mut [Vector<D>],
+) -> usize {
+    v.par_iter_mut()
+        .zip(x.par_iter())
+        .zip(near.par_iter())
+        .map(|((vp, xp), &near)| {
+            if !near {
+                return 0;
+            }
+            let d = region.distance(xp);
+            let into = vp.dot(&d.normal);
+            if d.distance > 0.0 && into > 0.0 {
+                *vp -= d.normal * into;
+                1
+            } else {
+                0
+            }
+        })
+        .sum()
+}
+
 /// Advection `x += dt v` and the deformation update of each material.
 pub fn advect<const D: usize>(materials: &[Material], particles: &mut Particles<D>, dt: Real)
 where
@@ -317,6 +404,60 @@ mod tests {
         assert!((grid.momentum[1] - Vector2::new(0.6, 0.0)).norm() < 1e-15);
         assert!((grid.momentum[2] - Vector2::new(-0.8, 0.0)).norm() < 1e-15);
         assert_eq!(grid.momentum[3], Vector2::zeros());
+    }
+
+    /// Next to a wall the truncated kernel reads a uniform fluid of density 1 about 25% light; with the
+    /// wall fractions it reads 1 within 4% (the particles' h/4 lattice and the h/8 sampling of the
+    /// fractions are two quadratures of the same cut kernel, a few percent apart at the cut).
+    #[test]
+    fn wall_fractions_restore_density_next_to_a_wall() {
+        use crate::geometry::{Point, Polygon, WallShape, Walls2};
+        let h = 1.0 / 32.0;
+        let layout = GridLayout::<2>::new(h, [32, 32]);
+        let floor = 0.3 + 0.3 * h;
+        let walls = Walls2::new(
+            vec![WallShape::Polygon(Polygon::new(vec![
+                Point::new(0.0, floor),
+                Point::new(1.0, floor),
+                Point::new(1.0, 1.0),
+                Point::new(0.0, 1.0),
+            ]))],
+            Point::new(1.0, 1.0),
+        );
+        let fractions = wall_fractions(&layout, &walls);
+        // A uniform fluid of density 1 on a fine lattice above the floor.
+        let spacing = h / 4.0;
+        let (mut x, mut mass) = (Vec::new(), Vec::new());
+        for j in 0..200 {
+            for i in 0..200 {
+                let p = Point::new(0.25 + (i as f64 + 0.5) * spacing, floor + (j as f64 + 0.5) * spacing);
+                if p.y < 0.9 && p.x < 0.75 {
+                    x.push(p);
+                    mass.push(spacing * spacing);
+                }
+            }
+        }
+        let mut grid_mass = vec![0.0; layout.num_nodes()];
+        scatter_mass(&layout, &x, &mass, &mut grid_mass).unwrap();
+        let probe = vec![Point::new(0.5, floor + 0.2 * h)];
+        let (mut plain, mut corrected) = (vec![0.0], vec![0.0]);
+        gather_density(&layout, &probe, &grid_mass, None, &mut plain);
+        gather_density(&layout, &probe, &grid_mass, Some(&fractions), &mut corrected);
+        assert!(plain[0] < 0.8, "truncated kernel: {}", plain[0]);
+        assert!((corrected[0] - 1.0).abs() < 0.04, "corrected: {}", corrected[0]);
+    }
+
+    /// A particle past a wall keeps its motion along the wall and back out, but not deeper in;
+    /// particles inside, or not flagged as near a wall, are untouched.
+    #[test]
+    fn particles_past_a_wall_are_held() {
+        use crate::geometry::{Point, Walls2};
+        let walls = Walls2::new(vec![], Point::new(1.0, 1.0)); // the domain box alone
+        let x = vec![Point::new(0.5, -0.01), Point::new(0.5, -0.01), Point::new(0.5, 0.2), Point::new(0.5, -0.01)];
+        let mut v = vec![Point::new(1.0, -2.0), Point::new(1.0, 2.0), Point::new(1.0, -2.0), Point::new(1.0, -2.0)];
+        let held = hold_at_walls(&walls, &[true, true, true, false], &x, &mut v);
+        assert_eq!(held, 1);
+        assert_eq!(v, vec![Point::new(1.0, 0.0), Point::new(1.0, 2.0), Point::new(1.0, -2.0), Point::new(1.0, -2.0)]);
     }
 
     /// A particle whose stencil leaves the grid is reported by index, not indexed out of bounds.

@@ -179,6 +179,7 @@ impl PySimulation {
         d.set_item("max_penetration", m.max_penetration)?;
         d.set_item("ill_conditioned", m.ill_conditioned)?;
         d.set_item("low_mass_nodes", m.low_mass_nodes)?;
+        d.set_item("held_at_wall", m.held_at_wall)?;
         Ok(d)
     }
 }

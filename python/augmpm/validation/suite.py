@@ -122,9 +122,10 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
     hyd = stage("hydrostatic column", lambda: hydrostatic.run(quick, angles))
 
     def draw_hyd(ax):
-        for (method, angle), (y, p, y_s) in hyd.items():
+        for (method, angle, corrected), (y, p, y_s) in hyd.items():
             if angle == 30.0:
-                ax.plot(y_s - y, p, ".", ms=1.5, color=COLOURS[method], label=f"{method} 30°")
+                ax.plot(y_s - y, p, "o" if corrected else "x", ms=3, color=COLOURS[method],
+                        label=f"{method} 30°{', density corrected' if corrected else ''}")  # fmt: skip
         depth = np.linspace(0, hydrostatic.DEPTH, 10)
         ax.plot(depth, hydrostatic.RHO * hydrostatic.G * depth, "k-", label="ρ g (H − y)")
         ax.set(xlabel="depth (m)", ylabel="pressure (Pa)", title="Hydrostatic column, walls at 30°")
