@@ -99,20 +99,20 @@ impl<const D: usize> GridLayout<D> {
 pub struct GridState<const D: usize> {
     /// Node mass (kg in 3D, kg/m in 2D).
     pub mass: Vec<Real>,
-    /// Σ |φ| m_p: equals `mass` unless some MLS shape functions were negative.
-    pub abs_mass: Vec<Real>,
+    /// Σ w m_p with the plain B-spline weights: equals `mass` on the regular grid.
+    pub spline_mass: Vec<Real>,
     /// Momentum after particle→grid, velocity (m/s) after the grid update.
     pub momentum: Vec<Vector<D>>,
 }
 
 impl<const D: usize> GridState<D> {
     pub fn new(n: usize) -> Self {
-        Self { mass: vec![0.0; n], abs_mass: vec![0.0; n], momentum: vec![Vector::<D>::zeros(); n] }
+        Self { mass: vec![0.0; n], spline_mass: vec![0.0; n], momentum: vec![Vector::<D>::zeros(); n] }
     }
 
     pub fn clear(&mut self) {
         self.mass.fill(0.0);
-        self.abs_mass.fill(0.0);
+        self.spline_mass.fill(0.0);
         self.momentum.fill(Vector::<D>::zeros());
     }
 }

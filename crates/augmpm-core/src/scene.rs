@@ -198,7 +198,7 @@ impl Default for AugmentedSpec {
 
 /// Largest grid accepted (nodes, ghosts included): 16.7 M nodes, about 1 GB of node state.
 const MAX_GRID_NODES: u64 = 1 << 24;
-/// Bytes of state per grid node (mass, absolute mass, momentum in 2D, flags), for the message.
+/// Bytes of state per grid node (mass, B-spline mass, momentum in 2D, flags), for the message.
 const GRID_BYTES_PER_NODE: u64 = 48;
 /// Largest number of jittered candidate points per body: 20 M particles need about 4 GB.
 const MAX_SEED_CANDIDATES: u64 = 20_000_000;

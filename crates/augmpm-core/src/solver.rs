@@ -99,7 +99,7 @@ pub struct Metrics {
     pub max_penetration: Real,
     /// Particle-steps so far whose MLS moment matrix was near-singular or empty (augmented grid).
     pub ill_conditioned: u64,
-    /// Node-steps so far whose MLS mass was below [`transfer::LOW_MASS_FRACTION`] of its absolute mass.
+    /// Node-steps so far whose MLS mass was below [`transfer::LOW_MASS_FRACTION`] of its B-spline mass.
     pub low_mass_nodes: u64,
     /// Particle-steps so far in which a particle past a wall was kept from moving deeper (augmented grid).
     pub held_at_wall: u64,

@@ -189,7 +189,7 @@ impl<const D: usize> Neighbourhood<D> for AugmentedStencil<'_, D> {
 
 /// Particle→grid transfer of mass and momentum with the stress term:
 /// `m_i += φ m_p`, `(mv)_i += φ m_p (v_p + C_p (x_i − x_p)) − dt V_p σ_p g` (eq. (6)),
-/// and the absolute mass `Σ |φ| m_p` that [`grid_velocity`] compares against.
+/// and the B-spline mass `Σ w m_p` that [`grid_velocity`] compares against.
 /// Serial, in particle order, so the sums are reproducible.
 pub fn p2g<const D: usize>(
     nbh: &impl Neighbourhood<D>,
@@ -206,17 +206,18 @@ pub fn p2g<const D: usize>(
         nbh.for_each(p, &particles.x[p], |i, w, dpos| {
             let (phi, g) = minv.shape(w, &dpos);
             grid.mass[i] += phi * mp;
-            grid.abs_mass[i] += phi.abs() * mp;
+            grid.spline_mass[i] += w * mp;
             grid.momentum[i] += (vp + cp * dpos) * (phi * mp) - force * g;
         })?;
     }
     Ok(())
 }
 
-/// A node whose MLS mass `Σ φ m_p` is below this fraction of its absolute mass
-/// `Σ |φ| m_p` (negative shape functions near walls cancel) divides its momentum by
-/// that fraction of the absolute mass instead, which bounds its velocity by
-/// 1/fraction times the particles' (and is exact where no φ is negative).
+/// A node whose MLS mass `Σ φ m_p` is below this fraction of its B-spline mass `Σ w m_p`
+/// divides its momentum by that fraction of the B-spline mass instead. Near walls φ = w(α + β·d)
+/// can vanish or turn negative while the force weight g = w(β + Γd) does not, so a node could get
+/// a finite force on a vanishing mass; with the floor its acceleration stays within 1/fraction of
+/// what the B-spline weights would give (on the regular grid φ = w and nothing changes).
 pub const LOW_MASS_FRACTION: Real = 0.5;
 
 /// Grid update: momentum → velocity, then gravity `g` (m/s²) over `dt` (s).
@@ -226,13 +227,13 @@ pub fn grid_velocity<const D: usize>(grid: &mut GridState<D>, gravity: &Vector<D
     grid.momentum
         .par_iter_mut()
         .zip(grid.mass.par_iter())
-        .zip(grid.abs_mass.par_iter())
-        .map(|((mv, &m), &abs)| {
-            if abs <= 0.0 {
+        .zip(grid.spline_mass.par_iter())
+        .map(|((mv, &m), &spline)| {
+            if spline <= 0.0 {
                 *mv = Vector::<D>::zeros();
                 return 0;
             }
-            let floor = LOW_MASS_FRACTION * abs;
+            let floor = LOW_MASS_FRACTION * spline;
             *mv = *mv / m.max(floor) + dv;
             usize::from(m < floor)
         })
@@ -384,13 +385,13 @@ mod tests {
         assert!((l_back - l_particles).abs() < 1e-12 * mass, "{l_back} vs {l_particles}");
     }
 
-    /// A node whose MLS mass cancels below half its absolute mass divides by that half: its velocity
-    /// stays within twice the particles' instead of blowing up, and it is counted.
+    /// A node whose MLS mass falls below half its B-spline mass divides by that half: a vanishing
+    /// mass cannot turn a finite force into a runaway velocity, and the node is counted.
     #[test]
     fn low_mass_nodes_are_bounded_and_counted() {
         let mut grid = GridState::<2> {
             mass: vec![1.0, 0.1, -0.2, 0.0],
-            abs_mass: vec![1.0, 1.0, 1.0, 0.0],
+            spline_mass: vec![1.0, 1.0, 1.0, 0.0],
             momentum: vec![
                 Vector2::new(2.0, 0.0),
                 Vector2::new(0.3, 0.0),
