@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Literal
 
@@ -21,12 +22,12 @@ class Simulation:
     >>> sim.positions.shape  # (N, 2), metres
     """
 
-    def __init__(self, scene: Scene | str | Path, method: Method = "naive") -> None:
+    def __init__(self, scene: Scene | str | Path, method: Method = "naive", threads: int | None = None) -> None:
         if not isinstance(scene, Scene):
             scene = load_scene(scene)
         self.scene = scene
         self.method = method
-        self._sim = _core.Simulation(scene.to_json(), method)
+        self._sim = _core.Simulation(scene.to_json(), method, resolve_threads(threads))
 
     def step(self, n: int = 1) -> None:
         """Advances ``n`` time steps; raises :class:`augmpm.SimulationError` if the state goes bad."""
@@ -88,6 +89,15 @@ class Simulation:
         return self._sim.cell_size
 
     @property
+    def threads(self) -> int:
+        """Number of threads the steps run on (results do not depend on it)."""
+        return self._sim.threads
+
+    def stage_times(self) -> dict[str, float]:
+        """Wall-clock seconds spent so far in each stage: sort, density, boundary, p2g, grid, g2p."""
+        return self._sim.stage_times()
+
+    @property
     def warnings(self) -> list[str]:
         return self._sim.warnings
 
@@ -103,3 +113,23 @@ class Simulation:
     def metrics(self) -> dict[str, float]:
         """``step, time, kinetic_energy, n_outside, max_penetration`` (the last in cell widths)."""
         return self._sim.metrics()
+
+
+THREADS_ENV = "AUGMPM_THREADS"
+
+
+def resolve_threads(threads: int | None = None) -> int:
+    """The thread count to run on: ``threads`` if given, else ``$AUGMPM_THREADS``, else every core
+    this process may use."""
+    source = "threads"
+    if threads is None and os.environ.get(THREADS_ENV, "").strip():
+        source, threads = THREADS_ENV, os.environ[THREADS_ENV].strip()
+        try:
+            threads = int(threads)
+        except ValueError:
+            raise _core.SceneError(f"{THREADS_ENV}: must be a positive integer, got {threads!r}") from None
+    if threads is None:
+        return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if not isinstance(threads, (int, np.integer)) or isinstance(threads, bool) or not 1 <= threads <= 1024:
+        raise _core.SceneError(f"{source}: must be an integer from 1 to 1024, got {threads!r}")
+    return int(threads)

@@ -7,7 +7,7 @@ use crate::boundary::WallCondition;
 use crate::geometry::Region;
 use crate::grid::GridLayout;
 use crate::kernel::{weight, MlsInverse, MlsKind, Moments, Stencil};
-use crate::math::{DimOps, Real, Vector};
+use crate::math::{floor_i64, DimOps, Real, Vector};
 use crate::transfer::OutOfGrid;
 
 /// A point sampled on a wall, carrying the wall's outward normal(s).
@@ -178,6 +178,18 @@ impl<const D: usize> AugmentedGrid<D> {
         Ok(())
     }
 
+    /// As [`Self::for_each_cached`], for a particle whose stencil is known to be in the grid.
+    #[inline]
+    pub fn for_each_near(
+        &self,
+        layout: &GridLayout<D>,
+        x: &Vector<D>,
+        near: &NearPoints,
+        f: impl FnMut(usize, Real, Vector<D>),
+    ) {
+        self.for_each_cached(layout, x, 0, near, f).expect("particles were sorted into the grid this step");
+    }
+
     /// The included nodes of the stencil at `x`; returns whether the closed form applies.
     #[inline]
     fn for_each_node(
@@ -203,8 +215,8 @@ impl<const D: usize> AugmentedGrid<D> {
     fn scan_points(&self, layout: &GridLayout<D>, x: &Vector<D>, mut f: impl FnMut(u32, Real, Vector<D>)) {
         let inv_h = 1.0 / layout.h;
         let reach = 1.5 * layout.h;
-        let lo: [i64; D] = std::array::from_fn(|k| ((x[k] - reach) * inv_h).floor() as i64);
-        let hi: [i64; D] = std::array::from_fn(|k| ((x[k] + reach) * inv_h).floor() as i64);
+        let lo: [i64; D] = std::array::from_fn(|k| floor_i64((x[k] - reach) * inv_h));
+        let hi: [i64; D] = std::array::from_fn(|k| floor_i64((x[k] + reach) * inv_h));
         let span: [usize; D] = std::array::from_fn(|k| (hi[k] - lo[k] + 1) as usize);
         let total: usize = span.iter().product();
         for k in 0..total {
@@ -226,6 +238,15 @@ impl<const D: usize> AugmentedGrid<D> {
         }
     }
 
+    /// Whether a particle at `x` has its whole stencil included and no boundary point in reach,
+    /// so that its MLS inverse is the closed form of the regular grid.
+    #[inline]
+    pub fn takes_closed_form(&self, layout: &GridLayout<D>, x: &Vector<D>, p: usize) -> Result<bool, OutOfGrid> {
+        let s = Stencil::new(x, 1.0 / layout.h);
+        let origin = layout.stencil_origin(&s.base).ok_or(OutOfGrid(p))?;
+        Ok(self.closed_form[origin])
+    }
+
     /// The particle's MLS inverse (eq. (5)), closed form where the stencil is whole and no
     /// boundary point is near, and the boundary points it sees, for the later stages.
     pub fn particle_inverse<Ops: DimOps<D>>(
@@ -234,11 +255,11 @@ impl<const D: usize> AugmentedGrid<D> {
         x: &Vector<D>,
         p: usize,
     ) -> Result<(MlsInverse<D>, MlsKind, NearPoints), OutOfGrid> {
-        let mut m = Moments::new();
-        let closed = self.for_each_node(layout, x, p, &mut |_, w, d| m.add(w, &d))?;
-        if closed {
+        if self.takes_closed_form(layout, x, p)? {
             return Ok((MlsInverse::regular(layout.h), MlsKind::Regular, NearPoints::NONE));
         }
+        let mut m = Moments::new();
+        self.for_each_node(layout, x, p, &mut |_, w, d| m.add(w, &d))?;
         let mut near = NearPoints::NONE;
         self.scan_points(layout, x, |b, w, d| {
             m.add(w, &d);
@@ -277,5 +298,82 @@ impl<const D: usize> AugmentedGrid<D> {
             let v = if mass[i] != 0.0 { velocity[i] } else { p.velocity };
             velocity[i] = condition.apply_at(v, &p.normals, &p.velocity);
         }
+    }
+}
+
+/// The particles of one step whose MLS system sees a wall (not the closed form), with their
+/// inverses and boundary points: computed once per step and read by P2G and G2P. Particles
+/// away from walls take the closed form and have no entry, so the table costs memory only for
+/// the particles near walls.
+#[derive(Clone, Debug, Default)]
+pub struct WallParticles<const D: usize> {
+    /// Per particle: its entry in the table, or [`WallParticles::NONE`].
+    slot: Vec<u32>,
+    /// Per entry: the particle, its inverse and the boundary points it sees.
+    particle: Vec<u32>,
+    minv: Vec<MlsInverse<D>>,
+    near: Vec<NearPoints>,
+}
+
+impl<const D: usize> WallParticles<D> {
+    /// Slot of a particle that takes the closed form.
+    pub const NONE: u32 = u32::MAX;
+
+    /// Finds the particles at `x` near walls and solves their MLS systems (eq. (5)). Returns
+    /// how many were ill-conditioned or isolated. Allocates only when the table grows.
+    pub fn update<Ops: DimOps<D>>(
+        &mut self,
+        grid: &AugmentedGrid<D>,
+        layout: &GridLayout<D>,
+        x: &[Vector<D>],
+    ) -> Result<u64, OutOfGrid> {
+        use rayon::prelude::*;
+        let parallel = x.len() >= crate::schedule::PARALLEL_MIN;
+        let min_task = if parallel { crate::schedule::MIN_TASK } else { usize::MAX };
+        self.slot.resize(x.len(), Self::NONE);
+        self.slot.par_iter_mut().zip(x.par_iter()).enumerate().with_min_len(min_task).try_for_each(
+            |(p, (slot, xp))| {
+                *slot = if grid.takes_closed_form(layout, xp, p)? { Self::NONE } else { 0 };
+                Ok(())
+            },
+        )?;
+        // Entries in particle order (a serial pass: a few ns per particle).
+        self.particle.clear();
+        for (p, slot) in self.slot.iter_mut().enumerate() {
+            if *slot != Self::NONE {
+                *slot = self.particle.len() as u32;
+                self.particle.push(p as u32);
+            }
+        }
+        let m = self.particle.len();
+        self.minv.resize(m, MlsInverse::regular(layout.h));
+        self.near.resize(m, NearPoints::NONE);
+        self.minv
+            .par_iter_mut()
+            .zip(self.near.par_iter_mut())
+            .zip(self.particle.par_iter())
+            .with_min_len(if parallel { 256 } else { usize::MAX })
+            .map(|((minv, near), &p)| {
+                let kind;
+                (*minv, kind, *near) = grid.particle_inverse::<Ops>(layout, &x[p as usize], p as usize)?;
+                Ok(u64::from(matches!(kind, MlsKind::Regularized | MlsKind::Isolated)))
+            })
+            .sum()
+    }
+
+    /// The table entry of particle `p`, if its MLS system sees a wall.
+    #[inline]
+    pub fn entry(&self, p: usize) -> Option<(&MlsInverse<D>, &NearPoints)> {
+        let s = *self.slot.get(p)?;
+        (s != Self::NONE).then(|| (&self.minv[s as usize], &self.near[s as usize]))
+    }
+
+    /// Number of particles whose MLS system sees a wall.
+    pub fn len(&self) -> usize {
+        self.particle.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.particle.is_empty()
     }
 }

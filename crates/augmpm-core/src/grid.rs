@@ -32,6 +32,12 @@ impl<const D: usize> GridLayout<D> {
         Self { h, cells, dims, strides }
     }
 
+    /// Index stride of each axis.
+    #[inline]
+    pub fn strides(&self) -> &[usize; D] {
+        &self.strides
+    }
+
     /// Total number of nodes, ghosts included.
     pub fn num_nodes(&self) -> usize {
         self.dims.iter().product()

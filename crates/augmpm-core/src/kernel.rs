@@ -24,9 +24,9 @@ impl<const D: usize> Stencil<D> {
         let mut fx = Vector::<D>::zeros();
         for k in 0..D {
             let xk = x[k] * inv_h;
-            let b = (xk - 0.5).floor();
-            let f = xk - b;
-            base[k] = b as i64;
+            let b = crate::math::floor_i64(xk - 0.5);
+            let f = xk - b as Real;
+            base[k] = b;
             fx[k] = f;
             w[k] = [0.5 * (1.5 - f).powi(2), 0.75 - (f - 1.0).powi(2), 0.5 * (f - 0.5).powi(2)];
         }

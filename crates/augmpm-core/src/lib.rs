@@ -18,9 +18,10 @@ pub mod material;
 pub mod math;
 pub mod particles;
 pub mod scene;
+pub mod schedule;
 pub mod solver;
 pub mod transfer;
 
 pub use boundary::{Method, WallCondition};
 pub use scene::{Scene, SceneError};
-pub use solver::{Metrics, Model, Simulation, StepError};
+pub use solver::{Metrics, Model, Simulation, StageTimes, StepError};

@@ -1,16 +1,16 @@
 //! The model (what does not change during a run), the simulation state and
 //! the time step, which only calls the stages of [`crate::transfer`] in order.
 
-use crate::augmented::{AugmentedGrid, NearPoints};
+use crate::augmented::{AugmentedGrid, WallParticles};
 use crate::boundary::NaiveBoundary;
 use crate::geometry::Region;
 use crate::grid::{GridLayout, GridState};
-use crate::kernel::{MlsInverse, MlsKind};
 use crate::material::{ConstitutiveModel, Material};
-use crate::math::{Dim, DimOps, Matrix, Real, Vector};
+use crate::math::{Dim, DimOps, Real, Vector};
 use crate::particles::Particles;
-use crate::transfer::{self, AugmentedStencil, Neighbourhood, OutOfGrid, RegularStencil};
-use rayon::prelude::*;
+use crate::schedule::Schedule;
+use crate::transfer::{self, GridDensity, OutOfGrid, Transfer};
+use std::time::Instant;
 
 /// How the walls act on the grid: one of the two methods of [`crate::boundary::Method`].
 pub enum Boundary<const D: usize> {
@@ -40,7 +40,7 @@ pub struct Model<const D: usize> {
     pub region: Box<dyn Region<D>>,
     pub boundary: Boundary<D>,
     /// Per node, the part of its support inside the material, when the fluid density is
-    /// corrected next to walls (see [`transfer::gather_density`]).
+    /// corrected next to walls (see [`transfer::density_at`]).
     pub wall_fraction: Option<Vec<Real>>,
     /// Time step (s).
     pub dt: Real,
@@ -72,17 +72,39 @@ pub enum StepError {
     NonFinite { step: u64, particle: usize },
 }
 
-/// Scratch arrays of a step, allocated once.
+/// Scratch arrays of a step, allocated once (they grow only with the particle count or the
+/// number of particles next to walls).
 struct Scratch<const D: usize> {
+    schedule: Schedule<D>,
     grid: GridState<D>,
+    /// B-spline grid mass of the density estimate (fluids only; empty otherwise).
+    density_mass: Vec<Real>,
     density: Vec<Real>,
-    stress: Vec<Matrix<D>>,
-    /// Per-particle MLS inverse and how it was obtained (augmented grid only).
-    minv: Vec<MlsInverse<D>>,
-    kind: Vec<MlsKind>,
-    near: Vec<NearPoints>,
-    /// Whether each particle's MLS system saw a wall this step (not the closed form).
-    at_wall: Vec<bool>,
+    /// Particles whose MLS system sees a wall, with their inverses (augmented grid only).
+    walls: WallParticles<D>,
+}
+
+/// Wall-clock time spent in each stage since the simulation was created (s).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StageTimes {
+    /// Binning particles by block, clearing the grid.
+    pub sort: f64,
+    /// Grid mass and density estimate (fluids).
+    pub density: f64,
+    /// Boundary-point lookups and per-particle MLS inverses (augmented grid).
+    pub boundary: f64,
+    /// Particle→grid transfer, stress included.
+    pub p2g: f64,
+    /// Grid velocity update and wall conditions.
+    pub grid: f64,
+    /// Grid→particle transfer, advection and deformation update.
+    pub g2p: f64,
+}
+
+impl StageTimes {
+    pub fn total(&self) -> f64 {
+        self.sort + self.density + self.boundary + self.p2g + self.grid + self.g2p
+    }
 }
 
 /// Diagnostics of the current state.
@@ -116,7 +138,10 @@ pub struct Simulation<const D: usize> {
     ill_conditioned: u64,
     low_mass_nodes: u64,
     held_at_wall: u64,
+    times: StageTimes,
     scratch: Scratch<D>,
+    /// The threads steps run on; `None` runs them in the caller's rayon context.
+    pool: Option<rayon::ThreadPool>,
 }
 
 impl<const D: usize> Simulation<D>
@@ -125,84 +150,139 @@ where
 {
     pub fn new(model: Model<D>, particles: Particles<D>) -> Self {
         let n = particles.len();
+        let density = model.needs_grid_density();
         let scratch = Scratch {
+            schedule: Schedule::new(&model.layout),
             grid: GridState::new(model.boundary.num_points(&model.layout)),
+            density_mass: if density { vec![0.0; model.layout.num_nodes()] } else { Vec::new() },
             density: vec![0.0; n],
-            stress: vec![Matrix::<D>::zeros(); n],
-            minv: vec![MlsInverse::regular(model.layout.h); n],
-            kind: vec![MlsKind::Regular; n],
-            near: vec![NearPoints::NONE; n],
-            at_wall: vec![false; n],
+            walls: WallParticles::default(),
         };
-        Self { model, particles, step: 0, time: 0.0, ill_conditioned: 0, low_mass_nodes: 0, held_at_wall: 0, scratch }
+        Self {
+            model,
+            particles,
+            step: 0,
+            time: 0.0,
+            ill_conditioned: 0,
+            low_mass_nodes: 0,
+            held_at_wall: 0,
+            times: StageTimes::default(),
+            scratch,
+            pool: None,
+        }
     }
 
-    /// One explicit MLS-MPM step: (density) → stress → (MLS inverses) → P2G →
-    /// grid update and walls → G2P → advection and deformation update.
-    pub fn step(&mut self) -> Result<(), StepError> {
-        let step = self.step + 1;
-        let left = |OutOfGrid(particle)| StepError::LeftGrid { step, particle };
-        let Self { model, particles, scratch, .. } = self;
-        let layout = &model.layout;
-        let dt = model.dt;
-
-        if model.needs_grid_density() {
-            transfer::scatter_mass(layout, &particles.x, &particles.mass, &mut scratch.grid.mass).map_err(left)?;
-            let fractions = model.wall_fraction.as_deref();
-            transfer::gather_density(layout, &particles.x, &scratch.grid.mass, fractions, &mut scratch.density);
-        }
-        transfer::compute_stress(&model.materials, particles, &scratch.density, &mut scratch.stress);
-        let low_mass = match &model.boundary {
-            Boundary::Naive(walls) => {
-                let nbh = RegularStencil { layout, minv: MlsInverse::regular(layout.h) };
-                transfer_momentum(&nbh, model, particles, &scratch.stress, &mut scratch.grid, |m, v| walls.apply(m, v))
-                    .map_err(left)?
-            }
-            Boundary::Augmented(grid) => {
-                // eq. (5), once per particle and step, reused by P2G, the force and G2P.
-                scratch
-                    .minv
-                    .par_iter_mut()
-                    .zip(scratch.kind.par_iter_mut())
-                    .zip(scratch.near.par_iter_mut())
-                    .zip(particles.x.par_iter())
-                    .enumerate()
-                    .try_for_each(|(p, (((minv, kind), near), x))| {
-                        (*minv, *kind, *near) = grid.particle_inverse::<Dim<D>>(layout, x, p)?;
-                        Ok(())
-                    })
-                    .map_err(left)?;
-                self.ill_conditioned +=
-                    scratch.kind.iter().filter(|k| matches!(k, MlsKind::Regularized | MlsKind::Isolated)).count()
-                        as u64;
-                let nbh = AugmentedStencil { layout, grid, minv: &scratch.minv, near: &scratch.near };
-                let low = transfer_momentum(&nbh, model, particles, &scratch.stress, &mut scratch.grid, |m, v| {
-                    grid.apply(m, v)
-                })
-                .map_err(left)?;
-                for (at_wall, kind) in scratch.at_wall.iter_mut().zip(&scratch.kind) {
-                    *at_wall = *kind != MlsKind::Regular;
-                }
-                self.held_at_wall +=
-                    transfer::hold_at_walls(model.region.as_ref(), &scratch.at_wall, &particles.x, &mut particles.v)
-                        as u64;
-                low
-            }
-        };
-        self.low_mass_nodes += low_mass as u64;
-        transfer::advect(&model.materials, particles, dt);
-
-        self.step = step;
-        self.time += dt;
-        if let Some(particle) = transfer::first_non_finite(&self.particles) {
-            return Err(StepError::NonFinite { step, particle });
-        }
+    /// Runs the steps on `threads` threads of the simulation's own pool (0: one per core), with
+    /// denormal floats flushed to zero on them (x86-64). Results do not depend on the count.
+    pub fn set_threads(&mut self, threads: usize) -> Result<(), String> {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .thread_name(|i| format!("augmpm-{i}"))
+            .start_handler(|_| crate::math::flush_denormals())
+            .build()
+            .map_err(|e| format!("cannot start {threads} threads: {e}"))?;
+        self.pool = Some(pool);
         Ok(())
     }
 
-    /// Takes `n` steps, stopping at the first failure.
+    /// Number of threads steps run on.
+    pub fn threads(&self) -> usize {
+        self.pool.as_ref().map_or_else(rayon::current_num_threads, |p| p.current_num_threads())
+    }
+
+    /// Time spent in each stage so far.
+    pub fn stage_times(&self) -> StageTimes {
+        self.times
+    }
+
+    /// One explicit MLS-MPM step: sort → (grid density) → (MLS inverses near walls) →
+    /// P2G with stress → grid update and walls → G2P with advection and deformation update.
+    pub fn step(&mut self) -> Result<(), StepError> {
+        self.advance(1)
+    }
+
+    /// Takes `n` steps on the simulation's threads, stopping at the first failure.
     pub fn advance(&mut self, n: u64) -> Result<(), StepError> {
-        (0..n).try_for_each(|_| self.step())
+        match self.pool.take() {
+            Some(pool) => {
+                let result = pool.install(|| (0..n).try_for_each(|_| self.step_here()));
+                self.pool = Some(pool);
+                result
+            }
+            None => (0..n).try_for_each(|_| self.step_here()),
+        }
+    }
+
+    fn step_here(&mut self) -> Result<(), StepError> {
+        let step = self.step + 1;
+        let left = |OutOfGrid(particle)| StepError::LeftGrid { step, particle };
+        let Self { model, particles, scratch, times, .. } = self;
+        let layout = &model.layout;
+        let dt = model.dt;
+        let mut clock = Instant::now();
+        let mut lap = |slot: &mut f64| {
+            let now = Instant::now();
+            *slot += (now - clock).as_secs_f64();
+            clock = now;
+        };
+
+        let Scratch { schedule, grid, density_mass, density, walls } = scratch;
+        schedule.prepare(layout, &particles.x).map_err(left)?;
+        density.resize(particles.len(), 0.0);
+        let nodes = layout.num_nodes();
+        schedule.clear(layout, schedule.stale(), &mut grid.mass[..nodes], 0.0);
+        schedule.clear(layout, schedule.stale(), &mut grid.spline_mass[..nodes], 0.0);
+        schedule.clear(layout, schedule.stale(), &mut grid.momentum[..nodes], Vector::<D>::zeros());
+        grid.mass[nodes..].fill(0.0);
+        grid.spline_mass[nodes..].fill(0.0);
+        grid.momentum[nodes..].fill(Vector::<D>::zeros());
+        lap(&mut times.sort);
+
+        let grid_density = if density_mass.is_empty() {
+            None
+        } else {
+            schedule.clear(layout, schedule.stale(), density_mass, 0.0);
+            transfer::scatter_mass(layout, schedule, &particles.x, &particles.mass, density_mass);
+            Some(GridDensity { grid_mass: density_mass, wall_fraction: model.wall_fraction.as_deref() })
+        };
+        lap(&mut times.density);
+
+        let augmented = match &model.boundary {
+            Boundary::Naive(_) => None,
+            Boundary::Augmented(g) => {
+                // eq. (5), once per particle near a wall and step, reused by P2G, the force and G2P.
+                self.ill_conditioned += walls.update::<Dim<D>>(g, layout, &particles.x).map_err(left)?;
+                Some((g, &*walls))
+            }
+        };
+        lap(&mut times.boundary);
+
+        let t = Transfer { layout, schedule, augmented };
+        transfer::p2g(&t, &model.materials, particles, grid_density, density, dt, grid);
+        lap(&mut times.p2g);
+
+        self.low_mass_nodes += transfer::grid_velocity(&t, grid, &model.gravity, dt) as u64;
+        match &model.boundary {
+            Boundary::Naive(w) => w.apply(&grid.mass, &mut grid.momentum),
+            Boundary::Augmented(g) => g.apply(&grid.mass, &mut grid.momentum),
+        }
+        lap(&mut times.grid);
+
+        let outcome = transfer::g2p(&t, model.region.as_ref(), &model.materials, &grid.momentum, particles, dt);
+        schedule.moved(outcome.max_speed * dt / layout.h);
+        lap(&mut times.g2p);
+        self.held_at_wall += outcome.held_at_wall as u64;
+        self.step = step;
+        self.time += dt;
+        if outcome.non_finite.is_some() || outcome.left_grid.is_some() {
+            // A later call must not trust the binning of a state that went bad.
+            schedule.invalidate();
+        }
+        match (outcome.non_finite, outcome.left_grid) {
+            (Some(particle), _) => Err(StepError::NonFinite { step, particle }),
+            (None, Some(particle)) => Err(StepError::LeftGrid { step, particle }),
+            (None, None) => Ok(()),
+        }
     }
 
     /// Density (kg/m³, or kg/m² in 2D) of each particle as gathered from the regular grid in
@@ -233,20 +313,4 @@ where
             held_at_wall: self.held_at_wall,
         }
     }
-}
-
-/// P2G, grid velocity with gravity, the walls' conditions, G2P. Returns the low-mass node count.
-fn transfer_momentum<const D: usize, N: Neighbourhood<D>>(
-    nbh: &N,
-    model: &Model<D>,
-    particles: &mut Particles<D>,
-    stress: &[Matrix<D>],
-    grid: &mut GridState<D>,
-    walls: impl Fn(&[Real], &mut [Vector<D>]),
-) -> Result<usize, OutOfGrid> {
-    transfer::p2g(nbh, particles, stress, model.dt, grid)?;
-    let low_mass = transfer::grid_velocity(grid, &model.gravity, model.dt);
-    walls(&grid.mass, &mut grid.momentum);
-    transfer::g2p(nbh, &grid.momentum, &particles.x, &mut particles.v, &mut particles.c);
-    Ok(low_mass)
 }

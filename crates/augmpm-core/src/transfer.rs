@@ -1,83 +1,91 @@
-//! The stages of one explicit MLS-MPM step, each a pure function over arrays.
+//! The stages of one explicit MLS-MPM step, each a function over arrays.
 //!
-//! Transfers are written with the MLS shape functions of [`MlsInverse`]
+//! Transfers are written with the MLS shape functions of [`crate::kernel::MlsInverse`]
 //! (`phi` for values, `g` for gradients and forces, eq. (4)–(6) of Toyota &
 //! Umetani 2024); on the regular grid they reduce to APIC MLS-MPM (Hu et al. 2018).
+//! Particle→grid stages scatter through a [`Schedule`] (coloured blocks, no atomics,
+//! bitwise reproducible for any thread count); grid→particle stages are per particle.
 
-use crate::augmented::{AugmentedGrid, NearPoints};
+use crate::augmented::{AugmentedGrid, WallParticles};
+use crate::geometry::Region;
 use crate::grid::{GridLayout, GridState};
-use crate::kernel::{MlsInverse, Stencil};
+use crate::kernel::Stencil;
 use crate::material::{ConstitutiveModel, Material, MaterialPoint};
 use crate::math::{Dim, DimOps, Matrix, Real, Vector};
 use crate::particles::Particles;
+use crate::schedule::{stencil_in_grid, Disjoint, Schedule, MIN_BLOCKS, MIN_TASK};
 use rayon::prelude::*;
 
 /// Particle index whose stencil left the grid.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct OutOfGrid(pub usize);
 
-#[inline]
-fn stencil_of<const D: usize>(
-    layout: &GridLayout<D>,
-    x: &Vector<D>,
-    p: usize,
-) -> Result<(Stencil<D>, usize), OutOfGrid> {
-    let s = Stencil::new(x, 1.0 / layout.h);
-    layout.stencil_origin(&s.base).map(|o| (s, o)).ok_or(OutOfGrid(p))
-}
-
-/// Scatters particle masses to the regular grid with the B-spline weights
-/// (never an augmented grid: density has no boundary condition).
+/// Scatters particle masses to the regular grid with the B-spline weights (never an augmented
+/// grid: density has no boundary condition). `grid_mass` must be zero on the schedule's active
+/// blocks; the particles must have been sorted by `schedule` at these positions.
 pub fn scatter_mass<const D: usize>(
     layout: &GridLayout<D>,
+    schedule: &Schedule<D>,
     x: &[Vector<D>],
     mass: &[Real],
     grid_mass: &mut [Real],
-) -> Result<(), OutOfGrid> {
-    grid_mass.fill(0.0);
-    for (p, (xp, mp)) in x.iter().zip(mass).enumerate() {
-        let (s, origin) = stencil_of(layout, xp, p)?;
-        s.for_each(layout.h, |o, w, _| grid_mass[origin + layout.offset(&o)] += w * mp);
-    }
-    Ok(())
+) {
+    let out = Disjoint::new(grid_mass);
+    let inv_h = 1.0 / layout.h;
+    schedule.for_each_block(|block| {
+        for &p in block {
+            let (s, origin) = stencil(layout, &x[p as usize], inv_h);
+            let mp = mass[p as usize];
+            // SAFETY: blocks scattered together never share a node (see `schedule`).
+            s.for_each(layout.h, |o, w, _| unsafe { out.update(origin + layout.offset(&o), |m| *m += w * mp) });
+        }
+    });
 }
 
-/// Gathers the density of each particle, ρ_p = Σ_i w_ip m_i / h^D.
+/// Stencil of a particle the schedule has sorted (so its stencil is inside the grid).
+#[inline(always)]
+fn stencil<const D: usize>(layout: &GridLayout<D>, x: &Vector<D>, inv_h: Real) -> (Stencil<D>, usize) {
+    let s = Stencil::new(x, inv_h);
+    let origin = layout.stencil_origin(&s.base).expect("particles were sorted into the grid this step");
+    (s, origin)
+}
+
+/// The density of a particle at `x`, ρ_p = Σ_i w_ip m_i / h^D.
 ///
 /// With `wall_fraction` (the part f_i of each node's B-spline support that lies inside the
 /// material region, see [`wall_fractions`]), node densities are `m_i / (h^D f_i)`, nodes with
 /// f_i < [`MIN_WALL_FRACTION`] are skipped and the weights renormalized: a fluid at rest density
 /// next to a wall then reads ρ0 instead of the truncated kernel's ~0.9 ρ0.
-pub fn gather_density<const D: usize>(
+#[inline]
+pub fn density_at<const D: usize>(
     layout: &GridLayout<D>,
-    x: &[Vector<D>],
+    s: &Stencil<D>,
+    origin: usize,
     grid_mass: &[Real],
     wall_fraction: Option<&[Real]>,
-    density: &mut [Real],
-) {
+) -> Real {
     let inv_cell_volume = layout.h.powi(-(D as i32));
-    density.par_iter_mut().zip(x.par_iter()).for_each(|(rho, xp)| {
-        let s = Stencil::new(xp, 1.0 / layout.h);
-        // Stencils were checked by scatter_mass on the same positions.
-        let origin = layout.stencil_origin(&s.base).expect("stencil checked by scatter_mass");
-        let (mut sum, mut weight) = (0.0, 0.0);
-        s.for_each(layout.h, |o, w, _| {
-            let i = origin + layout.offset(&o);
-            match wall_fraction {
-                None => sum += w * grid_mass[i],
-                Some(f) if f[i] >= MIN_WALL_FRACTION => {
+    let (mut sum, mut weight) = (0.0, 0.0);
+    match wall_fraction {
+        None => {
+            s.for_each(layout.h, |o, w, _| sum += w * grid_mass[origin + layout.offset(&o)]);
+            sum * inv_cell_volume
+        }
+        Some(f) => {
+            s.for_each(layout.h, |o, w, _| {
+                let i = origin + layout.offset(&o);
+                if f[i] >= MIN_WALL_FRACTION {
                     sum += w * grid_mass[i] / f[i];
                     weight += w;
                 }
-                Some(_) => {}
+            });
+            if weight > 0.0 {
+                sum / weight * inv_cell_volume
+            } else {
+                0.0
             }
-        });
-        *rho = match wall_fraction {
-            None => sum * inv_cell_volume,
-            Some(_) if weight > 0.0 => sum / weight * inv_cell_volume,
-            Some(_) => 0.0,
-        };
-    });
+        }
+    }
 }
 
 /// Nodes whose support lies less than this much inside the material are left out of the density.
@@ -85,7 +93,7 @@ pub const MIN_WALL_FRACTION: Real = 0.3;
 
 /// The fraction of each node's B-spline support inside `region`: ∫ w_i χ dx / h^D, by
 /// sampling the support at h/8 (1 far inside, 0 far outside; computed once, walls are still).
-pub fn wall_fractions<const D: usize>(layout: &GridLayout<D>, region: &dyn crate::geometry::Region<D>) -> Vec<Real> {
+pub fn wall_fractions<const D: usize>(layout: &GridLayout<D>, region: &dyn Region<D>) -> Vec<Real> {
     const SUB: usize = 8;
     let h = layout.h;
     let per_axis = 3 * SUB;
@@ -118,99 +126,102 @@ pub fn wall_fractions<const D: usize>(layout: &GridLayout<D>, region: &dyn crate
         .collect()
 }
 
-/// Computes `V_p σ_p` of every particle with its material.
-pub fn compute_stress<const D: usize>(
-    materials: &[Material],
-    particles: &Particles<D>,
-    density: &[Real],
-    stress: &mut [Matrix<D>],
-) where
-    Dim<D>: DimOps<D>,
-{
-    stress.par_iter_mut().enumerate().for_each(|(p, out)| {
-        let point = MaterialPoint {
-            f: particles.f[p],
-            jp: particles.jp[p],
-            grad_v: particles.c[p],
-            mass: particles.mass[p],
-            vol0: particles.vol0[p],
-            density: density[p],
-        };
-        *out = materials[particles.material[p] as usize].volume_stress(&point);
-    });
-}
-
-/// The grid points a particle interpolates from (regular nodes, and boundary
-/// points on an augmented grid) and the inverse of its MLS moment matrix.
-pub trait Neighbourhood<const D: usize>: Sync {
-    /// Calls `f(point, w, x_point − x_p)` for every grid point of particle `p` at `x`.
-    fn for_each(&self, p: usize, x: &Vector<D>, f: impl FnMut(usize, Real, Vector<D>)) -> Result<(), OutOfGrid>;
-    /// `M_p⁻¹` of particle `p` (eq. (5)).
-    fn inverse(&self, p: usize) -> MlsInverse<D>;
-}
-
-/// The whole 3^D stencil with the closed-form inverse: MLS-MPM on the regular grid.
-pub struct RegularStencil<'a, const D: usize> {
+/// Where a step's transfers run: the grid, the particle schedule and, on an augmented grid,
+/// the boundary points and the particles whose MLS systems see them.
+#[derive(Clone, Copy)]
+pub struct Transfer<'a, const D: usize> {
     pub layout: &'a GridLayout<D>,
-    pub minv: MlsInverse<D>,
+    pub schedule: &'a Schedule<D>,
+    pub augmented: Option<(&'a AugmentedGrid<D>, &'a WallParticles<D>)>,
 }
 
-impl<const D: usize> Neighbourhood<D> for RegularStencil<'_, D> {
-    #[inline]
-    fn for_each(&self, p: usize, x: &Vector<D>, mut f: impl FnMut(usize, Real, Vector<D>)) -> Result<(), OutOfGrid> {
-        let (s, origin) = stencil_of(self.layout, x, p)?;
-        s.for_each(self.layout.h, |o, w, d| f(origin + self.layout.offset(&o), w, d));
-        Ok(())
-    }
-    #[inline]
-    fn inverse(&self, _p: usize) -> MlsInverse<D> {
-        self.minv
-    }
-}
-
-/// Included nodes and boundary points of the augmented grid, with per-particle inverses.
-pub struct AugmentedStencil<'a, const D: usize> {
-    pub layout: &'a GridLayout<D>,
-    pub grid: &'a AugmentedGrid<D>,
-    pub minv: &'a [MlsInverse<D>],
-    pub near: &'a [NearPoints],
-}
-
-impl<const D: usize> Neighbourhood<D> for AugmentedStencil<'_, D> {
-    #[inline]
-    fn for_each(&self, p: usize, x: &Vector<D>, f: impl FnMut(usize, Real, Vector<D>)) -> Result<(), OutOfGrid> {
-        self.grid.for_each_cached(self.layout, x, p, &self.near[p], f)
-    }
-    #[inline]
-    fn inverse(&self, p: usize) -> MlsInverse<D> {
-        self.minv[p]
-    }
+/// The fluid density input of P2G: the B-spline grid mass of [`scatter_mass`] and, optionally,
+/// the nodes' wall fractions.
+#[derive(Clone, Copy)]
+pub struct GridDensity<'a> {
+    pub grid_mass: &'a [Real],
+    pub wall_fraction: Option<&'a [Real]>,
 }
 
 /// Particle→grid transfer of mass and momentum with the stress term:
 /// `m_i += φ m_p`, `(mv)_i += φ m_p (v_p + C_p (x_i − x_p)) − dt V_p σ_p g` (eq. (6)),
-/// and the B-spline mass `Σ w m_p` that [`grid_velocity`] compares against.
-/// Serial, in particle order, so the sums are reproducible.
+/// and, on an augmented grid, the B-spline mass `Σ w m_p` that [`grid_velocity`] compares
+/// against. Each particle's stress `V_p σ_p` is computed here from its material (with its grid
+/// density, written to `density`, when `grid_density` is given). `grid` must be zero on the
+/// schedule's active blocks and on the boundary points.
+///
+/// Away from walls φ = w and g = 4/h² w (x_i − x_p), and the momentum is `w (m v + A (x_i − x_p))`
+/// with one affine matrix `A = m C − 4 dt/h² V σ` per particle (the MLS-MPM form of Hu et al. 2018).
 pub fn p2g<const D: usize>(
-    nbh: &impl Neighbourhood<D>,
+    t: &Transfer<'_, D>,
+    materials: &[Material],
     particles: &Particles<D>,
-    stress: &[Matrix<D>],
+    grid_density: Option<GridDensity<'_>>,
+    density: &mut [Real],
     dt: Real,
     grid: &mut GridState<D>,
-) -> Result<(), OutOfGrid> {
-    grid.clear();
-    for p in 0..particles.len() {
-        let minv = nbh.inverse(p);
-        let mp = particles.mass[p];
-        let (vp, cp, force) = (particles.v[p], particles.c[p], stress[p] * dt);
-        nbh.for_each(p, &particles.x[p], |i, w, dpos| {
-            let (phi, g) = minv.shape(w, &dpos);
-            grid.mass[i] += phi * mp;
-            grid.spline_mass[i] += w * mp;
-            grid.momentum[i] += (vp + cp * dpos) * (phi * mp) - force * g;
-        })?;
-    }
-    Ok(())
+) where
+    Dim<D>: DimOps<D>,
+{
+    let layout = t.layout;
+    let (h, inv_h) = (layout.h, 1.0 / layout.h);
+    let apic = 4.0 * dt * inv_h * inv_h;
+    let track_spline = t.augmented.is_some();
+    let density_out = Disjoint::new(density);
+    let (mass, spline, momentum) =
+        (Disjoint::new(&mut grid.mass), Disjoint::new(&mut grid.spline_mass), Disjoint::new(&mut grid.momentum));
+    t.schedule.for_each_block(|block| {
+        for &p in block {
+            let p = p as usize;
+            let x = particles.x[p];
+            let (s, origin) = stencil(layout, &x, inv_h);
+            let rho = grid_density.map_or(0.0, |g| density_at(layout, &s, origin, g.grid_mass, g.wall_fraction));
+            // SAFETY (every `update` below): each particle is in one block, and blocks scattered
+            // together never share a grid point (see `schedule`).
+            unsafe { density_out.update(p, |d| *d = rho) };
+            let point = MaterialPoint {
+                f: particles.f[p],
+                jp: particles.jp[p],
+                grad_v: particles.c[p],
+                mass: particles.mass[p],
+                vol0: particles.vol0[p],
+                density: rho,
+            };
+            let stress = materials[particles.material[p] as usize].volume_stress(&point);
+            let (mp, vp, cp) = (particles.mass[p], particles.v[p], particles.c[p]);
+            match t.augmented.and_then(|(g, table)| table.entry(p).map(|e| (g, e))) {
+                None => {
+                    let affine = cp * mp - stress * apic;
+                    let mv = vp * mp;
+                    // The farthest node of the stencil: one bounds check for the 3^D writes.
+                    let last = origin + layout.offset(&[2; D]);
+                    assert!(last < mass.len() && last < spline.len() && last < momentum.len());
+                    s.for_each(h, |o, w, d| {
+                        let i = origin + layout.offset(&o);
+                        // SAFETY: i ≤ last, checked above; exclusive as stated above.
+                        unsafe {
+                            mass.update_unchecked(i, |m| *m += w * mp);
+                            if track_spline {
+                                spline.update_unchecked(i, |m| *m += w * mp);
+                            }
+                            momentum.update_unchecked(i, |m| *m += (mv + affine * d) * w);
+                        }
+                    });
+                }
+                Some((g, (minv, near))) => {
+                    let force = stress * dt;
+                    g.for_each_near(layout, &x, near, |i, w, d| {
+                        let (phi, grad) = minv.shape(w, &d);
+                        unsafe {
+                            mass.update(i, |m| *m += phi * mp);
+                            spline.update(i, |m| *m += w * mp);
+                            momentum.update(i, |m| *m += (vp + cp * d) * (phi * mp) - force * grad);
+                        }
+                    });
+                }
+            }
+        }
+    });
 }
 
 /// A node whose MLS mass `Σ φ m_p` is below this fraction of its B-spline mass `Σ w m_p`
@@ -220,109 +231,182 @@ pub fn p2g<const D: usize>(
 /// what the B-spline weights would give (on the regular grid φ = w and nothing changes).
 pub const LOW_MASS_FRACTION: Real = 0.5;
 
-/// Grid update: momentum → velocity, then gravity `g` (m/s²) over `dt` (s).
-/// Nodes without mass get zero velocity. Returns the number of low-mass nodes.
-pub fn grid_velocity<const D: usize>(grid: &mut GridState<D>, gravity: &Vector<D>, dt: Real) -> usize {
-    let dv = gravity * dt;
-    grid.momentum
-        .par_iter_mut()
-        .zip(grid.mass.par_iter())
-        .zip(grid.spline_mass.par_iter())
-        .map(|((mv, &m), &spline)| {
-            if spline <= 0.0 {
-                *mv = Vector::<D>::zeros();
-                return 0;
-            }
-            let floor = LOW_MASS_FRACTION * spline;
-            *mv = *mv / m.max(floor) + dv;
-            usize::from(m < floor)
-        })
-        .sum()
+/// Momentum → velocity of one grid point with MLS mass `m` and B-spline mass `spline`, plus `dv`
+/// (gravity over the step). A point without mass gets zero velocity. Returns whether the MLS
+/// mass was below [`LOW_MASS_FRACTION`] of the B-spline mass.
+#[inline]
+pub fn node_velocity<const D: usize>(mv: &mut Vector<D>, m: Real, spline: Real, dv: &Vector<D>) -> bool {
+    if spline <= 0.0 {
+        *mv = Vector::<D>::zeros();
+        return false;
+    }
+    let floor = LOW_MASS_FRACTION * spline;
+    *mv = *mv / m.max(floor) + dv;
+    m < floor
 }
 
-/// Grid→particle transfer: `v_p = Σ φ v_i`, `C_p = Σ v_i gᵀ` (eq. (4)).
+/// Grid update on the active blocks and the boundary points: momentum → velocity, then gravity
+/// `g` (m/s²) over `dt` (s). Returns the number of low-mass grid points.
+pub fn grid_velocity<const D: usize>(
+    t: &Transfer<'_, D>,
+    grid: &mut GridState<D>,
+    gravity: &Vector<D>,
+    dt: Real,
+) -> usize {
+    let dv = gravity * dt;
+    let track_spline = t.augmented.is_some();
+    let nodes = t.layout.num_nodes();
+    let GridState { mass, spline_mass, momentum } = grid;
+    let spline_of = |i: usize| if track_spline { spline_mass[i] } else { mass[i] };
+    let (node_momentum, point_momentum) = momentum.split_at_mut(nodes);
+    let out = Disjoint::new(node_momentum);
+    let low_nodes: usize = t
+        .schedule
+        .active()
+        .par_iter()
+        .with_min_len(t.schedule.min_len(MIN_BLOCKS))
+        .map(|&b| {
+            let mut low = 0;
+            // SAFETY: node blocks do not overlap and each active block is listed once.
+            t.schedule.for_each_node(t.layout, b, |i| unsafe {
+                out.update(i, |mv| low += usize::from(node_velocity(mv, mass[i], spline_of(i), &dv)));
+            });
+            low
+        })
+        .sum();
+    let low_points: usize = point_momentum
+        .iter_mut()
+        .enumerate()
+        .map(|(b, mv)| usize::from(node_velocity(mv, mass[nodes + b], spline_of(nodes + b), &dv)))
+        .sum();
+    low_nodes + low_points
+}
+
+/// What G2P found: particles held at walls, the first particle that went non-finite and the
+/// first whose stencil left the grid, and the largest speed along an axis (m/s).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct G2pOutcome {
+    pub held_at_wall: usize,
+    pub non_finite: Option<usize>,
+    pub left_grid: Option<usize>,
+    pub max_speed: Real,
+}
+
+/// Per-particle results of G2P, reduced in any order to the same [`G2pOutcome`].
+#[derive(Clone, Copy)]
+struct G2pSum {
+    held: usize,
+    non_finite: usize,
+    left_grid: usize,
+    max_speed: Real,
+}
+
+impl G2pSum {
+    const NONE: Self = Self { held: 0, non_finite: usize::MAX, left_grid: usize::MAX, max_speed: 0.0 };
+
+    fn join(self, o: Self) -> Self {
+        Self {
+            held: self.held + o.held,
+            non_finite: self.non_finite.min(o.non_finite),
+            left_grid: self.left_grid.min(o.left_grid),
+            max_speed: self.max_speed.max(o.max_speed),
+        }
+    }
+}
+
+/// Grid→particle transfer `v_p = Σ φ v_i`, `C_p = Σ v_i gᵀ` (eq. (4)), then, per particle, the
+/// hold of particles past a wall ([`hold_at_wall`], augmented grid only), advection
+/// `x += dt v`, and the deformation update of its material.
 pub fn g2p<const D: usize>(
-    nbh: &impl Neighbourhood<D>,
+    t: &Transfer<'_, D>,
+    region: &dyn Region<D>,
+    materials: &[Material],
     velocity: &[Vector<D>],
-    x: &[Vector<D>],
-    v: &mut [Vector<D>],
-    c: &mut [Matrix<D>],
-) {
-    v.par_iter_mut().zip(c.par_iter_mut()).zip(x.par_iter()).enumerate().for_each(|(p, ((vp, cp), xp))| {
-        let minv = nbh.inverse(p);
-        let mut vn = Vector::<D>::zeros();
-        let mut cn = Matrix::<D>::zeros();
-        // Every particle's points were checked by p2g on the same positions.
-        let _ = nbh.for_each(p, xp, |i, w, dpos| {
-            let vi = velocity[i];
-            let (phi, g) = minv.shape(w, &dpos);
-            vn += vi * phi;
-            cn += vi * g.transpose();
-        });
-        *vp = vn;
-        *cp = cn;
-    });
+    particles: &mut Particles<D>,
+    dt: Real,
+) -> G2pOutcome
+where
+    Dim<D>: DimOps<D>,
+{
+    let layout = t.layout;
+    let (h, inv_h) = (layout.h, 1.0 / layout.h);
+    let apic = 4.0 * inv_h * inv_h;
+    let Particles { x, v, c, f, jp, material, .. } = particles;
+    let sum = x
+        .par_iter_mut()
+        .zip(v.par_iter_mut())
+        .zip(c.par_iter_mut())
+        .zip(f.par_iter_mut())
+        .zip(jp.par_iter_mut())
+        .zip(material.par_iter())
+        .enumerate()
+        .with_min_len(t.schedule.min_len(MIN_TASK))
+        .map(|(p, (((((xp, vp), cp), fp), jpp), m))| {
+            let mut vn = Vector::<D>::zeros();
+            let mut cn = Matrix::<D>::zeros();
+            let mut held = false;
+            match t.augmented.and_then(|(g, table)| table.entry(p).map(|e| (g, e))) {
+                None => {
+                    let (s, origin) = stencil(layout, xp, inv_h);
+                    s.for_each(h, |o, w, d| {
+                        let vi = velocity[origin + layout.offset(&o)] * w;
+                        vn += vi;
+                        cn += vi * d.transpose();
+                    });
+                    cn *= apic;
+                }
+                Some((g, (minv, near))) => {
+                    g.for_each_near(layout, xp, near, |i, w, d| {
+                        let vi = velocity[i];
+                        let (phi, grad) = minv.shape(w, &d);
+                        vn += vi * phi;
+                        cn += vi * grad.transpose();
+                    });
+                    held = hold_at_wall(region, xp, &mut vn);
+                }
+            }
+            *vp = vn;
+            *cp = cn;
+            *xp += vn * dt;
+            materials[*m as usize].update_deformation(fp, jpp, cp, dt);
+            let finite = xp.iter().chain(vp.iter()).chain(fp.iter()).all(|a| a.is_finite());
+            G2pSum {
+                held: usize::from(held),
+                non_finite: if finite { usize::MAX } else { p },
+                left_grid: if stencil_in_grid(layout, xp, inv_h) { usize::MAX } else { p },
+                max_speed: vn.amax(),
+            }
+        })
+        .reduce(|| G2pSum::NONE, G2pSum::join);
+    let first = |p: usize| (p != usize::MAX).then_some(p);
+    G2pOutcome {
+        held_at_wall: sum.held,
+        non_finite: first(sum.non_finite),
+        left_grid: first(sum.left_grid),
+        max_speed: sum.max_speed,
+    }
 }
 
 /// A particle that has crossed a wall (its MLS fit then extrapolates, and left alone it can run
 /// away) loses the part of its velocity that would carry it deeper, `v −= n·max(v·n, 0)`, whatever
-/// the wall's condition; moving back out is free. Only particles near walls (`near[p]`) are
-/// checked. Returns how many were held.
-pub fn hold_at_walls<const D: usize>(
-    region: &dyn crate::geometry::Region<D>,
-    near: &[bool],
-    x: &[Vector<D>],
-    v: &mut [Vector<D>],
-) -> usize {
-    v.par_iter_mut()
-        .zip(x.par_iter())
-        .zip(near.par_iter())
-        .map(|((vp, xp), &near)| {
-            if !near {
-                return 0;
-            }
-            let d = region.distance(xp);
-            let into = vp.dot(&d.normal);
-            if d.distance > 0.0 && into > 0.0 {
-                *vp -= d.normal * into;
-                1
-            } else {
-                0
-            }
-        })
-        .sum()
-}
-
-/// Advection `x += dt v` and the deformation update of each material.
-pub fn advect<const D: usize>(materials: &[Material], particles: &mut Particles<D>, dt: Real)
-where
-    Dim<D>: DimOps<D>,
-{
-    let Particles { x, v, c, f, jp, material, .. } = particles;
-    x.par_iter_mut()
-        .zip(v.par_iter())
-        .zip(c.par_iter())
-        .zip(f.par_iter_mut())
-        .zip(jp.par_iter_mut())
-        .zip(material.par_iter())
-        .for_each(|(((((xp, vp), cp), fp), jpp), m)| {
-            *xp += vp * dt;
-            materials[*m as usize].update_deformation(fp, jpp, cp, dt);
-        });
-}
-
-/// The first particle whose state is not finite, if any.
-pub fn first_non_finite<const D: usize>(particles: &Particles<D>) -> Option<usize> {
-    (0..particles.len()).into_par_iter().find_first(|&p| {
-        !(particles.x[p].iter().all(|a| a.is_finite())
-            && particles.v[p].iter().all(|a| a.is_finite())
-            && particles.f[p].iter().all(|a| a.is_finite()))
-    })
+/// the wall's condition; moving back out is free. Returns whether it was held.
+#[inline]
+pub fn hold_at_wall<const D: usize>(region: &dyn Region<D>, x: &Vector<D>, v: &mut Vector<D>) -> bool {
+    let d = region.distance(x);
+    let into = v.dot(&d.normal);
+    if d.distance > 0.0 && into > 0.0 {
+        *v -= d.normal * into;
+        true
+    } else {
+        false
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::{Point, Polygon, WallShape, Walls2};
+    use crate::material::WeaklyCompressibleFluid;
     use nalgebra::{Matrix2, Vector2};
 
     fn random_particles(n: usize) -> Particles<2> {
@@ -343,30 +427,41 @@ mod tests {
         ps
     }
 
-    fn angular_momentum(x: &[Vector2<f64>], v: &[Vector2<f64>], m: &[f64], c: &[Matrix2<f64>], h: f64) -> f64 {
+    fn angular_momentum(ps: &Particles<2>, h: f64) -> f64 {
         // Particle angular momentum including the APIC affine part: Σ m (x × v) + m h²/4 (C₁₀ − C₀₁).
-        x.iter()
-            .zip(v)
-            .zip(m)
-            .zip(c)
-            .map(|(((x, v), m), c)| m * (x.perp(v) + h * h / 4.0 * (c[(1, 0)] - c[(0, 1)])))
+        (0..ps.len())
+            .map(|p| ps.mass[p] * (ps.x[p].perp(&ps.v[p]) + h * h / 4.0 * (ps.c[p][(1, 0)] - ps.c[p][(0, 1)])))
             .sum()
     }
 
-    /// With no walls and no stress, P2G → G2P conserves mass, linear and angular momentum to round-off.
+    /// A stress-free material: P2G → G2P must then conserve momentum exactly.
+    fn dust() -> Vec<Material> {
+        vec![Material::Fluid(WeaklyCompressibleFluid {
+            density: 1.0,
+            stiffness: 0.0,
+            gamma: 1.0,
+            viscosity: 0.0,
+            min_pressure: 0.0,
+        })]
+    }
+
+    /// With no walls and no stress, P2G → G2P conserves mass, linear and angular momentum to
+    /// round-off (relative 1e-12: a few hundred additions of O(1) terms in double precision).
     #[test]
     fn transfers_conserve_mass_and_momentum() {
         let h = 0.05;
         let layout = GridLayout::<2>::new(h, [20, 20]);
         let mut ps = random_particles(300);
-        let stress = vec![Matrix2::zeros(); ps.len()];
-        let nbh = RegularStencil { layout: &layout, minv: MlsInverse::regular(h) };
+        let mut schedule = Schedule::new(&layout);
+        schedule.sort(&layout, &ps.x).unwrap();
+        let t = Transfer { layout: &layout, schedule: &schedule, augmented: None };
         let mut grid = GridState::new(layout.num_nodes());
-        p2g(&nbh, &ps, &stress, 1e-3, &mut grid).unwrap();
+        let mut density = vec![0.0; ps.len()];
+        p2g(&t, &dust(), &ps, None, &mut density, 1e-3, &mut grid);
 
         let mass: f64 = ps.mass.iter().sum();
         let p_particles = ps.momentum();
-        let l_particles = angular_momentum(&ps.x, &ps.v, &ps.mass, &ps.c, h);
+        let l_particles = angular_momentum(&ps, h);
         let grid_mass: f64 = grid.mass.iter().sum();
         let p_grid = grid.momentum.iter().fold(Vector2::zeros(), |a, b| a + b);
         let l_grid: f64 = (0..layout.num_nodes()).map(|i| layout.position(i).perp(&grid.momentum[i])).sum();
@@ -374,13 +469,14 @@ mod tests {
         assert!((p_grid - p_particles).norm() < 1e-12 * mass);
         assert!((l_grid - l_particles).abs() < 1e-12 * mass, "{l_grid} vs {l_particles}");
 
-        grid_velocity(&mut grid, &Vector2::zeros(), 1e-3);
-        let (x, mut v, mut c) = (ps.x.clone(), ps.v.clone(), ps.c.clone());
-        g2p(&nbh, &grid.momentum, &x, &mut v, &mut c);
-        ps.v = v;
-        ps.c = c;
+        grid_velocity(&t, &mut grid, &Vector2::zeros(), 1e-3);
+        let before = ps.clone();
+        let walls = Walls2::new(vec![], Point::new(1.0, 1.0));
+        let outcome = g2p(&t, &walls, &dust(), &grid.momentum, &mut ps, 0.0);
+        assert_eq!((outcome.held_at_wall, outcome.non_finite, outcome.left_grid), (0, None, None));
+        assert_eq!(ps.x, before.x, "dt = 0 leaves positions");
         let p_back = ps.momentum();
-        let l_back = angular_momentum(&ps.x, &ps.v, &ps.mass, &ps.c, h);
+        let l_back = angular_momentum(&ps, h);
         assert!((p_back - p_particles).norm() < 1e-12 * mass, "{p_back} vs {p_particles}");
         assert!((l_back - l_particles).abs() < 1e-12 * mass, "{l_back} vs {l_particles}");
     }
@@ -389,22 +485,19 @@ mod tests {
     /// mass cannot turn a finite force into a runaway velocity, and the node is counted.
     #[test]
     fn low_mass_nodes_are_bounded_and_counted() {
-        let mut grid = GridState::<2> {
-            mass: vec![1.0, 0.1, -0.2, 0.0],
-            spline_mass: vec![1.0, 1.0, 1.0, 0.0],
-            momentum: vec![
-                Vector2::new(2.0, 0.0),
-                Vector2::new(0.3, 0.0),
-                Vector2::new(-0.4, 0.0),
-                Vector2::new(5.0, 0.0),
-            ],
-        };
-        let low = grid_velocity(&mut grid, &Vector2::zeros(), 1e-3);
-        assert_eq!(low, 2);
-        assert_eq!(grid.momentum[0], Vector2::new(2.0, 0.0));
-        assert!((grid.momentum[1] - Vector2::new(0.6, 0.0)).norm() < 1e-15);
-        assert!((grid.momentum[2] - Vector2::new(-0.8, 0.0)).norm() < 1e-15);
-        assert_eq!(grid.momentum[3], Vector2::zeros());
+        let dv = Vector2::zeros();
+        let mut mv = Vector2::new(2.0, 0.0);
+        assert!(!node_velocity(&mut mv, 1.0, 1.0, &dv));
+        assert_eq!(mv, Vector2::new(2.0, 0.0));
+        let mut mv = Vector2::new(0.3, 0.0);
+        assert!(node_velocity(&mut mv, 0.1, 1.0, &dv));
+        assert!((mv - Vector2::new(0.6, 0.0)).norm() < 1e-15);
+        let mut mv = Vector2::new(-0.4, 0.0);
+        assert!(node_velocity(&mut mv, -0.2, 1.0, &dv));
+        assert!((mv - Vector2::new(-0.8, 0.0)).norm() < 1e-15);
+        let mut mv = Vector2::new(5.0, 0.0);
+        assert!(!node_velocity(&mut mv, 0.0, 0.0, &dv));
+        assert_eq!(mv, Vector2::zeros());
     }
 
     /// Next to a wall the truncated kernel reads a uniform fluid of density 1 about 25% light; with the
@@ -412,7 +505,6 @@ mod tests {
     /// fractions are two quadratures of the same cut kernel, a few percent apart at the cut).
     #[test]
     fn wall_fractions_restore_density_next_to_a_wall() {
-        use crate::geometry::{Point, Polygon, WallShape, Walls2};
         let h = 1.0 / 32.0;
         let layout = GridLayout::<2>::new(h, [32, 32]);
         let floor = 0.3 + 0.3 * h;
@@ -438,36 +530,55 @@ mod tests {
                 }
             }
         }
+        let mut schedule = Schedule::new(&layout);
+        schedule.sort(&layout, &x).unwrap();
         let mut grid_mass = vec![0.0; layout.num_nodes()];
-        scatter_mass(&layout, &x, &mass, &mut grid_mass).unwrap();
-        let probe = vec![Point::new(0.5, floor + 0.2 * h)];
-        let (mut plain, mut corrected) = (vec![0.0], vec![0.0]);
-        gather_density(&layout, &probe, &grid_mass, None, &mut plain);
-        gather_density(&layout, &probe, &grid_mass, Some(&fractions), &mut corrected);
-        assert!(plain[0] < 0.8, "truncated kernel: {}", plain[0]);
-        assert!((corrected[0] - 1.0).abs() < 0.04, "corrected: {}", corrected[0]);
+        scatter_mass(&layout, &schedule, &x, &mass, &mut grid_mass);
+        let probe = Stencil::new(&Point::new(0.5, floor + 0.2 * h), 1.0 / h);
+        let origin = layout.stencil_origin(&probe.base).unwrap();
+        let plain = density_at(&layout, &probe, origin, &grid_mass, None);
+        let corrected = density_at(&layout, &probe, origin, &grid_mass, Some(&fractions));
+        assert!(plain < 0.8, "truncated kernel: {plain}");
+        assert!((corrected - 1.0).abs() < 0.04, "corrected: {corrected}");
     }
 
     /// A particle past a wall keeps its motion along the wall and back out, but not deeper in;
-    /// particles inside, or not flagged as near a wall, are untouched.
+    /// particles inside are untouched.
     #[test]
     fn particles_past_a_wall_are_held() {
-        use crate::geometry::{Point, Walls2};
         let walls = Walls2::new(vec![], Point::new(1.0, 1.0)); // the domain box alone
-        let x = vec![Point::new(0.5, -0.01), Point::new(0.5, -0.01), Point::new(0.5, 0.2), Point::new(0.5, -0.01)];
-        let mut v = vec![Point::new(1.0, -2.0), Point::new(1.0, 2.0), Point::new(1.0, -2.0), Point::new(1.0, -2.0)];
-        let held = hold_at_walls(&walls, &[true, true, true, false], &x, &mut v);
-        assert_eq!(held, 1);
-        assert_eq!(v, vec![Point::new(1.0, 0.0), Point::new(1.0, 2.0), Point::new(1.0, -2.0), Point::new(1.0, -2.0)]);
+        let mut v = Point::new(1.0, -2.0);
+        assert!(hold_at_wall(&walls, &Point::new(0.5, -0.01), &mut v));
+        assert_eq!(v, Point::new(1.0, 0.0));
+        let mut v = Point::new(1.0, 2.0);
+        assert!(!hold_at_wall(&walls, &Point::new(0.5, -0.01), &mut v));
+        assert_eq!(v, Point::new(1.0, 2.0));
+        let mut v = Point::new(1.0, -2.0);
+        assert!(!hold_at_wall(&walls, &Point::new(0.5, 0.2), &mut v));
+        assert_eq!(v, Point::new(1.0, -2.0));
     }
 
-    /// A particle whose stencil leaves the grid is reported by index, not indexed out of bounds.
+    /// P2G sums are bitwise identical on 1 and 2 threads (the coloured scatter fixes their order).
     #[test]
-    fn out_of_grid_is_reported() {
-        let layout = GridLayout::<2>::new(0.1, [4, 4]);
-        let mut ps = random_particles(3);
-        ps.x[1] = Vector2::new(-0.5, 0.2);
-        let mut mass = vec![0.0; layout.num_nodes()];
-        assert_eq!(scatter_mass(&layout, &ps.x, &ps.mass, &mut mass), Err(OutOfGrid(1)));
+    fn scatter_is_reproducible_across_thread_counts() {
+        let h = 0.02;
+        let layout = GridLayout::<2>::new(h, [50, 50]);
+        let ps = random_particles(20_000);
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| {
+                let mut schedule = Schedule::new(&layout);
+                schedule.sort(&layout, &ps.x).unwrap();
+                assert!(schedule.parallel());
+                let t = Transfer { layout: &layout, schedule: &schedule, augmented: None };
+                let mut grid = GridState::new(layout.num_nodes());
+                let mut density = vec![0.0; ps.len()];
+                p2g(&t, &dust(), &ps, None, &mut density, 1e-3, &mut grid);
+                grid
+            })
+        };
+        let (one, two) = (run(1), run(2));
+        assert_eq!(one.mass, two.mass);
+        assert_eq!(one.momentum, two.momentum);
     }
 }

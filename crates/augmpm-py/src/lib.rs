@@ -53,20 +53,36 @@ pub(crate) fn vectors_to_array<'py>(
 #[pymethods]
 impl PySimulation {
     #[new]
-    fn new(scene_json: &str, method: &str) -> PyResult<Self> {
-        let method = match method {
-            "naive" => Method::Naive,
-            "augmented" => Method::Augmented,
-            other => {
-                return Err(scene_error(
-                    "method",
-                    &format!("unknown method {other:?}; expected \"naive\" or \"augmented\""),
-                ))
-            }
-        };
+    #[pyo3(signature = (scene_json, method, threads=0))]
+    fn new(scene_json: &str, method: &str, threads: usize) -> PyResult<Self> {
+        let method = parse_method(method)?;
         let scene = Scene::from_json(scene_json).map_err(|e| scene_error(&e.key, &e.reason))?;
-        let (sim, warnings) = scene.build(method).map_err(|e| scene_error(&e.key, &e.reason))?;
+        let (mut sim, warnings) = scene.build(method).map_err(|e| scene_error(&e.key, &e.reason))?;
+        sim.set_threads(threads).map_err(|e| scene_error("threads", &e))?;
         Ok(Self { sim, warnings })
+    }
+
+    /// Number of threads the steps run on.
+    #[getter]
+    fn threads(&self) -> usize {
+        self.sim.threads()
+    }
+
+    /// Wall-clock seconds spent so far in each stage of the step: sort, density, boundary, p2g, grid, g2p.
+    fn stage_times<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let t = self.sim.stage_times();
+        let d = PyDict::new(py);
+        for (k, v) in [
+            ("sort", t.sort),
+            ("density", t.density),
+            ("boundary", t.boundary),
+            ("p2g", t.p2g),
+            ("grid", t.grid),
+            ("g2p", t.g2p),
+        ] {
+            d.set_item(k, v)?;
+        }
+        Ok(d)
     }
 
     /// Takes `n` steps (the GIL is released meanwhile). Raises SimulationError on failure;

@@ -33,7 +33,14 @@ fn default_gamma() -> Real {
 impl WeaklyCompressibleFluid {
     /// Pressure (Pa) at density `rho`.
     pub fn pressure(&self, rho: Real) -> Real {
-        (self.stiffness * ((rho / self.density).powf(self.gamma) - 1.0)).max(self.min_pressure)
+        let ratio = rho / self.density;
+        // Integer exponents (the usual 1, 4, 7) by multiplication: powf is a libm call.
+        let power = if self.gamma.fract() == 0.0 && self.gamma <= 16.0 {
+            ratio.powi(self.gamma as i32)
+        } else {
+            ratio.powf(self.gamma)
+        };
+        (self.stiffness * (power - 1.0)).max(self.min_pressure)
     }
 
     /// Cauchy stress (Pa) at density `rho` and velocity gradient `grad_v` (1/s).

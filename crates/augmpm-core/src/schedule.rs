@@ -1,0 +1,473 @@
+//! The order in which the transfers visit particles: particles binned by grid block, and blocks
+//! grouped in colours so that P2G can scatter in parallel without atomics.
+//!
+//! A particle whose stencil starts at node `o` (per axis, ghost-shifted coordinates) writes to
+//! the nodes `o ..= o + 2` and to the boundary points of the cells `o − 1 ..= o + 2`. Particles
+//! are binned by the block `o / B` of their stencil origin, and re-binned only when they may
+//! have moved more than [`SLACK`] cells since: until then block `k` writes only within
+//! `k·B − 1 − S ..= k·B + B + 1 + S`. Blocks are coloured by the parity of their coordinate
+//! along each axis (2^D colours): two blocks of one colour lie 2B apart along some axis, and
+//! with B > 2 + 2S they never write the same grid point. P2G scatters the colours one after
+//! another, the blocks of a colour in parallel, and the particles of a block in index order.
+//! Every grid point therefore receives its sums in one fixed order, whatever the number of
+//! threads: results are bitwise identical for 1 or N threads.
+//!
+//! The schedule also knows which node blocks the particles can touch (the active blocks), so
+//! the grid is cleared and updated only there.
+
+use crate::grid::GridLayout;
+use crate::math::{floor_i64, Real, Vector};
+use crate::transfer::OutOfGrid;
+use rayon::prelude::*;
+use std::marker::PhantomData;
+
+/// Nodes per block edge (> 2 + 2·SLACK, see the module documentation).
+pub const BLOCK: usize = 8;
+/// Cells a particle may move from where it was binned before the particles are binned again.
+pub const SLACK: Real = 2.0;
+const _: () = assert!(BLOCK > 2 + 2 * SLACK as usize);
+/// Fixed number of particle chunks of the parallel counting sort (independent of the thread count).
+const CHUNKS: usize = 8;
+/// Below this many particles a step runs on one thread: the scatter's synchronisation would cost
+/// more than it saves.
+pub const PARALLEL_MIN: usize = 4096;
+/// Smallest piece of a per-particle loop handed to one thread.
+pub const MIN_TASK: usize = 2048;
+/// Smallest piece of a per-block loop handed to one thread (blocks of BLOCK^D nodes).
+pub const MIN_BLOCKS: usize = 128;
+/// Key of a particle whose stencil is not inside the grid.
+const OUT_OF_GRID: u32 = u32::MAX;
+
+/// A slice that several threads write at indices no two of them share.
+#[derive(Clone, Copy)]
+pub(crate) struct Disjoint<'a, T> {
+    ptr: *mut T,
+    len: usize,
+    _slice: PhantomData<&'a mut [T]>,
+}
+
+// SAFETY: `Disjoint` only hands out access through `update`, whose callers promise that no two
+// threads touch the same index; `T: Send` lets the values be written from another thread.
+unsafe impl<T: Send> Send for Disjoint<'_, T> {}
+unsafe impl<T: Send> Sync for Disjoint<'_, T> {}
+
+impl<'a, T> Disjoint<'a, T> {
+    pub(crate) fn new(slice: &'a mut [T]) -> Self {
+        Self { ptr: slice.as_mut_ptr(), len: slice.len(), _slice: PhantomData }
+    }
+
+    /// Applies `f` to element `i`.
+    ///
+    /// # Safety
+    /// No other thread may access element `i` while `self` is shared.
+    #[inline(always)]
+    pub(crate) unsafe fn update(&self, i: usize, f: impl FnOnce(&mut T)) {
+        assert!(i < self.len, "index {i} out of a slice of {}", self.len);
+        // SAFETY: in bounds (checked above); exclusive by the caller's promise.
+        f(unsafe { &mut *self.ptr.add(i) });
+    }
+
+    /// Length of the slice.
+    #[inline(always)]
+    pub(crate) fn len(&self) -> usize {
+        self.len
+    }
+
+    /// As [`Self::update`], without the bounds check.
+    ///
+    /// # Safety
+    /// `i < self.len()`, and no other thread may access element `i` while `self` is shared.
+    #[inline(always)]
+    pub(crate) unsafe fn update_unchecked(&self, i: usize, f: impl FnOnce(&mut T)) {
+        debug_assert!(i < self.len);
+        // SAFETY: the caller's promises.
+        f(unsafe { &mut *self.ptr.add(i) });
+    }
+}
+
+/// Particles sorted by block, the non-empty blocks by colour, and the active node blocks.
+#[derive(Clone, Debug)]
+pub struct Schedule<const D: usize> {
+    /// Blocks along each axis.
+    block_dims: [usize; D],
+    /// Per particle: its block (scratch of the sort).
+    key: Vec<u32>,
+    /// Particle indices sorted by block, in index order within a block.
+    order: Vec<u32>,
+    /// `order[start[b]..start[b + 1]]` are the particles of block `b`.
+    start: Vec<u32>,
+    /// Per chunk and block: particle counts, then write offsets (chunk-major).
+    hist: Vec<u32>,
+    /// Non-empty blocks grouped by colour: `coloured[colour_start[c]..colour_start[c + 1]]`.
+    coloured: Vec<u32>,
+    colour_start: Vec<usize>,
+    /// Node blocks some particle's stencil reaches, ascending, and those of the previous sort.
+    active: Vec<u32>,
+    stale: Vec<u32>,
+    mark: Vec<bool>,
+    parallel: bool,
+    /// Largest distance (in cells, per axis) a particle may have moved since the last binning;
+    /// infinite before the first.
+    drift: Real,
+    /// Whether the last [`Schedule::prepare`] binned the particles again.
+    rebinned: bool,
+}
+
+impl<const D: usize> Schedule<D> {
+    pub fn new(layout: &GridLayout<D>) -> Self {
+        let block_dims: [usize; D] = std::array::from_fn(|k| layout.dims[k].div_ceil(BLOCK));
+        let n: usize = block_dims.iter().product();
+        Self {
+            block_dims,
+            key: Vec::new(),
+            order: Vec::new(),
+            start: vec![0; n + 1],
+            hist: vec![0; CHUNKS * n],
+            coloured: Vec::with_capacity(n),
+            colour_start: vec![0; (1 << D) + 1],
+            active: Vec::with_capacity(n),
+            stale: Vec::with_capacity(n),
+            mark: vec![false; n],
+            parallel: false,
+            drift: Real::INFINITY,
+            rebinned: false,
+        }
+    }
+
+    fn num_blocks(&self) -> usize {
+        self.mark.len()
+    }
+
+    /// Block coordinates of block `b`.
+    fn block_coord(&self, mut b: usize) -> [usize; D] {
+        std::array::from_fn(|k| {
+            let c = b % self.block_dims[k];
+            b /= self.block_dims[k];
+            c
+        })
+    }
+
+    /// Whether the transfers of this step run in parallel (enough particles).
+    pub fn parallel(&self) -> bool {
+        self.parallel
+    }
+
+    /// The smallest piece a parallel loop may hand to one thread: `piece`, or everything in one
+    /// piece (no other thread woken) when the step runs serially.
+    pub fn min_len(&self, piece: usize) -> usize {
+        if self.parallel {
+            piece
+        } else {
+            usize::MAX
+        }
+    }
+
+    /// Records that every particle moved at most `cells` cell widths along each axis.
+    pub fn moved(&mut self, cells: Real) {
+        self.drift += cells;
+    }
+
+    /// Forgets the binning: the next [`Schedule::prepare`] bins again (e.g. after a failed step).
+    pub fn invalidate(&mut self) {
+        self.drift = Real::INFINITY;
+    }
+
+    /// Makes the schedule valid for particles at `x`: bins them again if they may have moved
+    /// more than [`SLACK`] cells since they were binned, or their number changed.
+    pub fn prepare(&mut self, layout: &GridLayout<D>, x: &[Vector<D>]) -> Result<(), OutOfGrid> {
+        // A NaN drift (never produced: G2P stops on non-finite velocities) would also rebin.
+        self.rebinned = self.drift.is_nan() || self.drift > SLACK || x.len() != self.order.len();
+        if self.rebinned {
+            self.sort(layout, x)?;
+        }
+        Ok(())
+    }
+
+    /// Bins the particles at `x` by block. Fails with the lowest-numbered particle whose
+    /// stencil is not inside the grid. Allocates only when the particle count grows.
+    pub fn sort(&mut self, layout: &GridLayout<D>, x: &[Vector<D>]) -> Result<(), OutOfGrid> {
+        self.drift = Real::INFINITY;
+        self.rebinned = true;
+        let n = x.len();
+        assert!(n < u32::MAX as usize, "particle indices are stored as u32");
+        self.parallel = n >= PARALLEL_MIN;
+        self.key.resize(n, 0);
+        self.order.resize(n, 0);
+        let inv_h = 1.0 / layout.h;
+        let block_dims = self.block_dims;
+        let key_of = |(key, xp): (&mut u32, &Vector<D>)| *key = block_of(layout, &block_dims, xp, inv_h);
+        if self.parallel {
+            self.key.par_iter_mut().zip(x.par_iter()).with_min_len(MIN_TASK).for_each(key_of);
+        } else {
+            self.key.iter_mut().zip(x).for_each(key_of);
+        }
+
+        // Counting sort in fixed chunks (CHUNKS, or one when serial): histogram, offsets
+        // (block-major), scatter.
+        let nb = self.num_blocks();
+        let chunks = if self.parallel { CHUNKS } else { 1 };
+        let chunk = n.div_ceil(chunks).max(1);
+        let min_chunks = self.min_len(1);
+        let hist = &mut self.hist[..chunks * nb];
+        hist.fill(0);
+        let outside = hist
+            .par_chunks_mut(nb)
+            .zip(self.key.par_chunks(chunk))
+            .enumerate()
+            .with_min_len(min_chunks)
+            .filter_map(|(c, (hist, keys))| {
+                for (j, &k) in keys.iter().enumerate() {
+                    if k == OUT_OF_GRID {
+                        return Some(c * chunk + j);
+                    }
+                    hist[k as usize] += 1;
+                }
+                None
+            })
+            .min();
+        if let Some(p) = outside {
+            return Err(OutOfGrid(p));
+        }
+        let mut running = 0u32;
+        for b in 0..nb {
+            self.start[b] = running;
+            for c in 0..chunks {
+                let h = &mut hist[c * nb + b];
+                let count = *h;
+                *h = running;
+                running += count;
+            }
+        }
+        self.start[nb] = running;
+        let order = Disjoint::new(&mut self.order);
+        hist.par_chunks_mut(nb).zip(self.key.par_chunks(chunk)).enumerate().with_min_len(min_chunks).for_each(
+            |(c, (offset, keys))| {
+                for (j, &k) in keys.iter().enumerate() {
+                    let slot = offset[k as usize] as usize;
+                    offset[k as usize] += 1;
+                    // SAFETY: the offsets of distinct (chunk, particle) pairs are distinct slots.
+                    unsafe { order.update(slot, |o| *o = (c * chunk + j) as u32) };
+                }
+            },
+        );
+
+        // Non-empty blocks by colour, and the node blocks their stencils reach (block k and k + 1
+        // per axis). Blocks are visited in index order with their coordinates counted along.
+        let colours = 1usize << D;
+        const { assert!(D <= 3, "at most 8 colours") };
+        let colour_of = |c: &[usize; D]| (0..D).map(|k| (c[k] & 1) << k).sum::<usize>();
+        let next = |c: &mut [usize; D]| {
+            for k in 0..D {
+                c[k] += 1;
+                if c[k] < block_dims[k] {
+                    return;
+                }
+                c[k] = 0;
+            }
+        };
+        self.colour_start.fill(0);
+        let mut c = [0usize; D];
+        for b in 0..nb {
+            if self.start[b + 1] > self.start[b] {
+                self.colour_start[colour_of(&c) + 1] += 1;
+            }
+            next(&mut c);
+        }
+        for k in 0..colours {
+            self.colour_start[k + 1] += self.colour_start[k];
+        }
+        self.coloured.resize(self.colour_start[colours], 0);
+        let mut fill: [usize; 8] = [0; 8];
+        fill[..colours].copy_from_slice(&self.colour_start[..colours]);
+        let strides: [usize; D] = std::array::from_fn(|k| block_dims[..k].iter().product());
+        let mut c = [0usize; D];
+        for b in 0..nb {
+            if self.start[b + 1] > self.start[b] {
+                let colour = colour_of(&c);
+                self.coloured[fill[colour]] = b as u32;
+                fill[colour] += 1;
+                // Node blocks k − 1 ..= k + 1 along each axis (SLACK < BLOCK − 1 cells of drift).
+                for k in 0..3usize.pow(D as u32) {
+                    let o = crate::math::stencil_offset::<D>(k);
+                    if (0..D).all(|a| c[a] + o[a] >= 1 && c[a] + o[a] - 1 < block_dims[a]) {
+                        let at: usize = (0..D).map(|a| (c[a] + o[a] - 1) * strides[a]).sum();
+                        self.mark[at] = true;
+                    }
+                }
+            }
+            next(&mut c);
+        }
+        self.drift = 0.0;
+        std::mem::swap(&mut self.active, &mut self.stale);
+        self.active.clear();
+        for (b, m) in self.mark.iter_mut().enumerate() {
+            if *m {
+                self.active.push(b as u32);
+                *m = false;
+            }
+        }
+        Ok(())
+    }
+
+    /// Calls `f` with the particles of every non-empty block, colour after colour; the blocks
+    /// of one colour run in parallel when the step is parallel.
+    pub fn for_each_block(&self, f: impl Fn(&[u32]) + Sync) {
+        for c in 0..(1usize << D) {
+            let blocks = &self.coloured[self.colour_start[c]..self.colour_start[c + 1]];
+            let run = |&b: &u32| f(&self.order[self.start[b as usize] as usize..self.start[b as usize + 1] as usize]);
+            if self.parallel {
+                blocks.par_iter().for_each(run);
+            } else {
+                blocks.iter().for_each(run);
+            }
+        }
+    }
+
+    /// Node blocks the particles' stencils can reach until they are binned again.
+    pub fn active(&self) -> &[u32] {
+        &self.active
+    }
+
+    /// Node blocks the grid may hold values in from the previous step (to be cleared).
+    pub fn stale(&self) -> &[u32] {
+        if self.rebinned {
+            &self.stale
+        } else {
+            &self.active
+        }
+    }
+
+    /// Calls `f(node)` for every node of node block `b`.
+    #[inline]
+    pub fn for_each_node(&self, layout: &GridLayout<D>, b: u32, mut f: impl FnMut(usize)) {
+        let c = self.block_coord(b as usize);
+        let lo: [usize; D] = std::array::from_fn(|k| c[k] * BLOCK);
+        let span: [usize; D] = std::array::from_fn(|k| BLOCK.min(layout.dims[k] - lo[k]));
+        let total: usize = span.iter().product();
+        for j in 0..total {
+            let mut r = j;
+            let mut idx = 0;
+            for k in 0..D {
+                idx += (lo[k] + r % span[k]) * layout.strides()[k];
+                r /= span[k];
+            }
+            f(idx);
+        }
+    }
+
+    /// Sets `data` to `zero` on every node of the given node blocks (in parallel).
+    pub fn clear<T: Copy + Send + Sync>(&self, layout: &GridLayout<D>, blocks: &[u32], data: &mut [T], zero: T) {
+        let out = Disjoint::new(data);
+        blocks.par_iter().with_min_len(self.min_len(MIN_BLOCKS)).for_each(|&b| {
+            // SAFETY: node blocks do not overlap, and each is listed once.
+            self.for_each_node(layout, b, |i| unsafe { out.update(i, |v| *v = zero) });
+        });
+    }
+}
+
+/// Whether the whole stencil of a particle at `x` is inside the grid.
+#[inline]
+pub fn stencil_in_grid<const D: usize>(layout: &GridLayout<D>, x: &Vector<D>, inv_h: Real) -> bool {
+    (0..D).all(|k| {
+        let o = floor_i64(x[k] * inv_h - 0.5) + crate::grid::GHOST;
+        x[k].is_finite() && o >= 0 && (o as usize) + 2 < layout.dims[k]
+    })
+}
+
+/// Block of the stencil origin of a particle at `x`, or [`OUT_OF_GRID`].
+#[inline]
+fn block_of<const D: usize>(layout: &GridLayout<D>, block_dims: &[usize; D], x: &Vector<D>, inv_h: Real) -> u32 {
+    let mut key = 0usize;
+    for k in (0..D).rev() {
+        // Ghost-shifted node coordinate of the stencil's lowest node; the stencil needs o + 2 in the grid.
+        let o = floor_i64(x[k] * inv_h - 0.5) + crate::grid::GHOST;
+        if !x[k].is_finite() || o < 0 || o as usize + 2 >= layout.dims[k] {
+            return OUT_OF_GRID;
+        }
+        key = key * block_dims[k] + o as usize / BLOCK;
+    }
+    key as u32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector2;
+
+    fn scattered(n: usize, seed: u64) -> Vec<Vector2<f64>> {
+        let mut s = seed;
+        let mut rnd = || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        (0..n).map(|_| Vector2::new(rnd(), rnd())).collect()
+    }
+
+    /// The sort is a permutation, grouped by block, in index order within a block; every
+    /// non-empty block has one colour; active blocks cover every particle's stencil.
+    #[test]
+    fn sort_groups_particles_by_block() {
+        let layout = GridLayout::<2>::new(1.0 / 40.0, [40, 40]);
+        let x = scattered(5000, 3);
+        let mut s = Schedule::new(&layout);
+        s.sort(&layout, &x).unwrap();
+        let mut seen = vec![false; x.len()];
+        let mut visited = 0;
+        s.for_each_block(|ps| {
+            for w in ps.windows(2) {
+                assert!(w[0] < w[1]);
+            }
+            let key = block_of(&layout, &s.block_dims, &x[ps[0] as usize], 40.0);
+            assert!(ps.iter().all(|&p| block_of(&layout, &s.block_dims, &x[p as usize], 40.0) == key));
+        });
+        for &p in &s.order {
+            assert!(!std::mem::replace(&mut seen[p as usize], true));
+            visited += 1;
+        }
+        assert_eq!(visited, x.len());
+        let mut active = vec![false; layout.num_nodes()];
+        for &b in s.active() {
+            s.for_each_node(&layout, b, |i| active[i] = true);
+        }
+        for xp in &x {
+            let st = crate::kernel::Stencil::new(xp, 40.0);
+            let o = layout.stencil_origin(&st.base).unwrap();
+            st.for_each(layout.h, |off, _, _| assert!(active[o + layout.offset(&off)]));
+        }
+    }
+
+    /// Two blocks of one colour never reach a common node or boundary-point cell.
+    #[test]
+    fn blocks_of_one_colour_are_apart() {
+        let layout = GridLayout::<2>::new(0.1, [30, 30]);
+        let s = Schedule::new(&layout);
+        let reach = |b: usize| {
+            let c = s.block_coord(b);
+            // Cells k·B − 1 − S ..= k·B + B + 1 + S along each axis.
+            let slack = SLACK as i64;
+            std::array::from_fn::<_, 2, _>(|k| {
+                (c[k] as i64 * BLOCK as i64 - 1 - slack, (c[k] * BLOCK + BLOCK + 1) as i64 + slack)
+            })
+        };
+        for a in 0..s.num_blocks() {
+            for b in a + 1..s.num_blocks() {
+                let (ca, cb) = (s.block_coord(a), s.block_coord(b));
+                if (0..2).all(|k| ca[k] % 2 == cb[k] % 2) {
+                    let (ra, rb) = (reach(a), reach(b));
+                    let overlap = (0..2).all(|k| ra[k].0 <= rb[k].1 && rb[k].0 <= ra[k].1);
+                    assert!(!overlap, "blocks {ca:?} and {cb:?}");
+                }
+            }
+        }
+    }
+
+    /// The lowest-numbered particle outside the grid is the one reported.
+    #[test]
+    fn first_particle_outside_is_reported() {
+        let layout = GridLayout::<2>::new(0.1, [10, 10]);
+        let mut x = scattered(9000, 5);
+        x[7000] = Vector2::new(5.0, 0.5);
+        x[4000] = Vector2::new(0.5, -1.0);
+        assert_eq!(Schedule::new(&layout).sort(&layout, &x), Err(OutOfGrid(4000)));
+    }
+}
