@@ -6,6 +6,7 @@ Exit codes: 0 success, 1 a failed run (the simulation went bad), 2 bad input.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -14,6 +15,7 @@ from augmpm.run import run_scene
 from augmpm.scene import load_scene
 
 EXIT_OK, EXIT_FAILED_RUN, EXIT_BAD_INPUT = 0, 1, 2
+_THREADS_HELP = "threads to run on (default: $AUGMPM_THREADS, else every core); results do not depend on it"
 
 
 class _Parser(argparse.ArgumentParser):
@@ -44,6 +46,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--gif", action="store_true", help="write animation.gif instead of animation.mp4")
     r.add_argument("--no-render", action="store_true", help="skip PNG frames and the animation")
     r.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    r.add_argument("--threads", type=int, metavar="N", help=_THREADS_HELP)
 
     c = sub.add_parser("compare", help="run a scene with the naive and the augmented walls, side by side")
     c.add_argument("scene", type=Path, help="scene file (TOML)")
@@ -52,6 +55,13 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     c.add_argument("--gif", action="store_true", help="write comparison.gif instead of comparison.mp4")
     c.add_argument("--no-progress", action="store_true", help="hide the progress bars")
+    c.add_argument("--threads", type=int, metavar="N", help=_THREADS_HELP)
+
+    b = sub.add_parser("bench", help="measure speed, memory and output cost (run from the repository root)")
+    b.add_argument("--quick", action="store_true", help="fewer steps, dam break at 128² and 256² only (~1 min)")
+    b.add_argument("--json", type=Path, metavar="FILE", help="also write the report as JSON")
+    b.add_argument("--fig1", type=Path, default=Path("scenes/paper/fluid_incline_noslip.toml"), help="Fig. 1 scene")
+    b.add_argument("--threads", type=int, metavar="N", help="threads of the multi-threaded rows (default: every core)")
 
     v = sub.add_parser("validate", help="run the validation suite (analytic flows, experiments) and write a report")
     v.add_argument("--quick", action="store_true", help="coarse and short (a few minutes on 2 cores)")
@@ -83,6 +93,7 @@ def _run(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         animation=None if args.no_render else ("gif" if args.gif else "mp4"),
         render=not args.no_render,
+        threads=args.threads,
     )
     for w in result.warnings:
         print(f"augmpm: warning: {w}", file=sys.stderr)
@@ -107,7 +118,12 @@ def _compare(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene, args.overrides)
     out = _output_dir(args.out or Path("runs") / f"{scene.name or args.scene.stem}-compare")
     result = compare_scene(
-        scene, out, steps=args.steps, progress=not args.no_progress, animation="gif" if args.gif else "mp4"
+        scene,
+        out,
+        steps=args.steps,
+        progress=not args.no_progress,
+        animation="gif" if args.gif else "mp4",
+        threads=args.threads,
     )
     print(result.table())
     ext = "gif" if args.gif else "mp4"
@@ -129,6 +145,18 @@ def _validate(args: argparse.Namespace) -> int:
     for r in failed:
         print(f"  not met: {r.case} {r.angle_deg:g}° {r.metric} = {r.value:.4g} (tolerance {r.tolerance:g})")
     return EXIT_OK if all_augmented_pass(records) else EXIT_FAILED_RUN
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from augmpm.bench import format_report, run_bench
+
+    report = run_bench(quick=args.quick, fig1=args.fig1, threads=args.threads, log=lambda s: print(s, file=sys.stderr))
+    print(format_report(report))
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(report, indent=2), encoding="utf-8")
+        print(f"report written to {args.json}")
+    return EXIT_OK
 
 
 def _interp_test(args: argparse.Namespace) -> int:
@@ -160,6 +188,8 @@ def main(argv: list[str] | None = None) -> int:
             return _interp_test(args)
         if args.command == "validate":
             return _validate(args)
+        if args.command == "bench":
+            return _bench(args)
     except _core.SceneError as e:
         print(f"augmpm: bad input: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -43,12 +43,20 @@ def _read_metrics(path: Path) -> list[dict[str, str]]:
 
 
 def compare_scene(
-    scene: Scene, out: str | Path, steps: int | None = None, progress: bool = True, animation: str | None = "mp4"
+    scene: Scene,
+    out: str | Path,
+    steps: int | None = None,
+    progress: bool = True,
+    animation: str | None = "mp4",
+    threads: int | None = None,
 ) -> Comparison:
     """Runs `scene` with both methods into `out/naive` and `out/augmented` and writes
     `comparison.csv`, `comparison.png` (both methods over time) and a side-by-side animation."""
     out = Path(out)
-    runs = {m: run_scene(scene, out / m, method=m, steps=steps, progress=progress, animation=None) for m in METHODS}
+    runs = {
+        m: run_scene(scene, out / m, method=m, steps=steps, progress=progress, animation=None, threads=threads)
+        for m in METHODS
+    }
     metrics = {m: _read_metrics(out / m / "metrics.csv") for m in METHODS}
     rows: list[dict[str, float]] = []
     for i in range(max(len(v) for v in metrics.values())):

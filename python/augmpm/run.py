@@ -52,6 +52,7 @@ def run_scene(
     progress: bool = True,
     animation: str | None = "mp4",
     render: bool = True,
+    threads: int | None = None,
 ) -> RunResult:
     """Runs ``scene`` and writes its outputs into ``out``.
 
@@ -60,7 +61,7 @@ def run_scene(
     ``error`` says at which step and why.
     """
     out = Path(out)
-    sim = Simulation(scene, method)
+    sim = Simulation(scene, method, threads=threads)
     total = scene.time.steps if steps is None else steps
     interval = scene.time.output_interval
     out.mkdir(parents=True, exist_ok=True)

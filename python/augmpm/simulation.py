@@ -93,6 +93,10 @@ class Simulation:
         """Number of threads the steps run on (results do not depend on it)."""
         return self._sim.threads
 
+    def memory_use(self) -> dict[str, int]:
+        """Heap bytes of the particle state, the per-particle scratch of a step and the grid."""
+        return self._sim.memory_use()
+
     def stage_times(self) -> dict[str, float]:
         """Wall-clock seconds spent so far in each stage: sort, density, boundary, p2g, grid, g2p."""
         return self._sim.stage_times()

@@ -133,6 +133,12 @@ impl<const D: usize> AugmentedGrid<D> {
         Self { points, included, closed_form, cell_start, cell_points, walls, delta }
     }
 
+    /// Heap bytes of the boundary points, node flags and the per-cell index.
+    pub fn heap_bytes(&self) -> usize {
+        use crate::math::heap_bytes as b;
+        b(&self.points) + b(&self.included) + b(&self.closed_form) + b(&self.cell_start) + b(&self.cell_points)
+    }
+
     /// Number of regular nodes; boundary point `b` is grid point `num_nodes + b`.
     pub fn num_nodes(&self) -> usize {
         self.included.len()
@@ -366,6 +372,12 @@ impl<const D: usize> WallParticles<D> {
     pub fn entry(&self, p: usize) -> Option<(&MlsInverse<D>, &NearPoints)> {
         let s = *self.slot.get(p)?;
         (s != Self::NONE).then(|| (&self.minv[s as usize], &self.near[s as usize]))
+    }
+
+    /// Heap bytes of the table (`slot` is per particle, the rest per particle near a wall).
+    pub fn heap_bytes(&self) -> usize {
+        use crate::math::heap_bytes as b;
+        b(&self.slot) + b(&self.particle) + b(&self.minv) + b(&self.near)
     }
 
     /// Number of particles whose MLS system sees a wall.

@@ -112,6 +112,11 @@ impl<const D: usize> NaiveBoundary<D> {
         Self { nodes, walls }
     }
 
+    /// Heap bytes of the wall-node list.
+    pub fn heap_bytes(&self) -> usize {
+        crate::math::heap_bytes(&self.nodes) + crate::math::heap_bytes(&self.walls)
+    }
+
     /// Projects the grid velocities of wall nodes (after momentum → velocity).
     pub fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>]) {
         for w in &self.nodes {

@@ -116,6 +116,12 @@ impl<const D: usize> GridState<D> {
         Self { mass: vec![0.0; n], spline_mass: vec![0.0; n], momentum: vec![Vector::<D>::zeros(); n] }
     }
 
+    /// Heap bytes of the arrays.
+    pub fn heap_bytes(&self) -> usize {
+        use crate::math::heap_bytes as b;
+        b(&self.mass) + b(&self.spline_mass) + b(&self.momentum)
+    }
+
     pub fn clear(&mut self) {
         self.mass.fill(0.0);
         self.spline_mass.fill(0.0);

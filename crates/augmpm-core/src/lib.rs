@@ -24,4 +24,4 @@ pub mod transfer;
 
 pub use boundary::{Method, WallCondition};
 pub use scene::{Scene, SceneError};
-pub use solver::{Metrics, Model, Simulation, StageTimes, StepError};
+pub use solver::{MemoryUse, Metrics, Model, Simulation, StageTimes, StepError};

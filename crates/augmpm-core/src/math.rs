@@ -93,6 +93,11 @@ pub fn flush_denormals() {
     }
 }
 
+/// Heap bytes of a vector's allocation (its capacity, not its length).
+pub fn heap_bytes<T>(v: &Vec<T>) -> usize {
+    v.capacity() * std::mem::size_of::<T>()
+}
+
 /// Number of nodes in the 3^D stencil of the quadratic B-spline.
 pub const fn stencil_len(d: usize) -> usize {
     3usize.pow(d as u32)

@@ -47,6 +47,20 @@ impl<const D: usize> Particles<D> {
         self.material.push(material);
     }
 
+    /// Heap bytes of the particle arrays.
+    pub fn heap_bytes(&self) -> usize {
+        use crate::math::heap_bytes as b;
+        b(&self.x)
+            + b(&self.v)
+            + b(&self.c)
+            + b(&self.f)
+            + b(&self.jp)
+            + b(&self.mass)
+            + b(&self.vol0)
+            + b(&self.body)
+            + b(&self.material)
+    }
+
     /// Total kinetic energy ½ Σ m v² (J, or J/m in 2D), summed in particle order.
     pub fn kinetic_energy(&self) -> Real {
         0.5 * self.mass.iter().zip(&self.v).map(|(m, v)| m * v.norm_squared()).sum::<Real>()

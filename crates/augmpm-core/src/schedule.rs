@@ -138,6 +138,17 @@ impl<const D: usize> Schedule<D> {
         self.mark.len()
     }
 
+    /// Heap bytes of the per-particle arrays (`key`, `order`).
+    pub fn particle_bytes(&self) -> usize {
+        crate::math::heap_bytes(&self.key) + crate::math::heap_bytes(&self.order)
+    }
+
+    /// Heap bytes of the per-block arrays.
+    pub fn block_bytes(&self) -> usize {
+        use crate::math::heap_bytes as b;
+        b(&self.start) + b(&self.hist) + b(&self.coloured) + b(&self.active) + b(&self.stale) + b(&self.mark)
+    }
+
     /// Block coordinates of block `b`.
     fn block_coord(&self, mut b: usize) -> [usize; D] {
         std::array::from_fn(|k| {

@@ -107,6 +107,17 @@ impl StageTimes {
     }
 }
 
+/// Heap bytes held by a simulation, by what they scale with.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MemoryUse {
+    /// Particle state.
+    pub particles: usize,
+    /// Per-particle scratch of a step: density, binning, the wall table of the augmented grid.
+    pub particle_scratch: usize,
+    /// Grid: node state, density mass, blocks, wall fractions, walls' node lists and boundary points.
+    pub grid: usize,
+}
+
 /// Diagnostics of the current state.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Metrics {
@@ -188,6 +199,25 @@ where
     /// Number of threads steps run on.
     pub fn threads(&self) -> usize {
         self.pool.as_ref().map_or_else(rayon::current_num_threads, |p| p.current_num_threads())
+    }
+
+    /// Heap bytes of the particle, scratch and grid arrays.
+    pub fn memory_use(&self) -> MemoryUse {
+        use crate::math::heap_bytes as b;
+        let s = &self.scratch;
+        let boundary = match &self.model.boundary {
+            Boundary::Naive(w) => w.heap_bytes(),
+            Boundary::Augmented(g) => g.heap_bytes(),
+        };
+        MemoryUse {
+            particles: self.particles.heap_bytes(),
+            particle_scratch: b(&s.density) + s.schedule.particle_bytes() + s.walls.heap_bytes(),
+            grid: s.grid.heap_bytes()
+                + b(&s.density_mass)
+                + s.schedule.block_bytes()
+                + self.model.wall_fraction.as_ref().map_or(0, b)
+                + boundary,
+        }
     }
 
     /// Time spent in each stage so far.

@@ -68,6 +68,16 @@ impl PySimulation {
         self.sim.threads()
     }
 
+    /// Heap bytes of the particle state, the per-particle scratch and the grid.
+    fn memory_use<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let m = self.sim.memory_use();
+        let d = PyDict::new(py);
+        d.set_item("particles", m.particles)?;
+        d.set_item("particle_scratch", m.particle_scratch)?;
+        d.set_item("grid", m.grid)?;
+        Ok(d)
+    }
+
     /// Wall-clock seconds spent so far in each stage of the step: sort, density, boundary, p2g, grid, g2p.
     fn stage_times<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let t = self.sim.stage_times();

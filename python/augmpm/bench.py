@@ -1,0 +1,334 @@
+"""``augmpm bench``: the engine's speed, memory and output cost, measured.
+
+Cases (issue 5):
+
+- the paper's Fig. 1 scene (viscous fluid on a no-slip incline), naive and augmented, timed over
+  10,000 steps (``--quick``: 2,000, scaled to 10,000) and compared with the authors' code
+  (9.3 s naive, 32.3 s augmented, one thread of this machine kind; ``spec/paper-scenes.md``);
+- a fluid dam break in a tank tilted 20° to the grid (so that many particles sit next to
+  inclined walls) at three sizes, ~8k particles on 128², ~65k on 256², ~530k on 512²: naive and
+  augmented, on 1 and on 2 threads: particle-steps per second, the augmented/naive cost ratio,
+  the 2-thread speed-up, peak memory per particle, and the time split per stage;
+- the cost of output: a paper-scene run with every output (frames, images, animation) against the
+  same run without.
+
+Configurations compared with each other run interleaved in one process (A B A B …), because this
+machine's speed drifts by up to 2× over an hour; memory is measured in a fresh process per
+configuration (peak resident set size over that of a process that only imported augmpm).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import platform
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+from augmpm.scene import Scene, load_scene
+from augmpm.simulation import Simulation
+
+#: The authors' code on this machine kind, Fig. 1 scene, 10,000 steps, one thread (s).
+AUTHORS_FIG1_SECONDS = {"naive": 9.3, "augmented": 32.3}
+#: Fig. 1 steps of the paper's comparison.
+FIG1_STEPS = 10_000
+DEFAULT_FIG1 = Path("scenes/paper/fluid_incline_noslip.toml")
+#: Dam-break sizes: grid resolution → (particles per cell, part of the tank's width filled).
+DAM_BREAK_SIZES = {128: (4, 0.22), 256: (4, 0.44), 512: (8, 0.44)}
+METHODS = ("naive", "augmented")
+STAGES = ("sort", "density", "boundary", "p2g", "grid", "g2p")
+
+
+def dam_break_scene(resolution: int) -> Scene:
+    """A water column against the lower-left wall of a square tank rotated 20° about the domain
+    centre; gravity −9.81 m/s², CFL 0.5 time step."""
+    per_cell, fill = DAM_BREAK_SIZES[resolution]
+    angle = math.radians(20.0)
+    cos, sin = math.cos(angle), math.sin(angle)
+    side = 0.97 / (cos + sin)  # the rotated tank fits in the unit domain with a 1.5% margin
+    margin = 0.75 / resolution  # keep seeded particles 3/4 of a cell off the walls
+
+    def place(u: float, v: float) -> list[float]:
+        return [0.5 + cos * u - sin * v, 0.5 + sin * u + cos * v]
+
+    half = side / 2
+    tank = [place(-half, -half), place(half, -half), place(half, half), place(-half, half)]
+    u0, u1 = -half + margin, -half + fill * side
+    v0, v1 = -half + margin, half - margin
+    water = [place(u0, v0), place(u1, v0), place(u1, v1), place(u0, v1)]
+    return Scene.from_dict(
+        {
+            "name": f"bench_dam_break_{resolution}",
+            "seed": 1,
+            "gravity": [0.0, -9.81],
+            "wall_condition": "slip",
+            "grid": {"domain": [1.0, 1.0], "resolution": resolution},
+            "time": {"cfl": 0.5, "steps": 100, "output_interval": 100},
+            "walls": [{"type": "polygon", "vertices": tank}],
+            "bodies": [
+                {
+                    "shape": "polygon",
+                    "vertices": water,
+                    "seeding": {"per_cell": per_cell},
+                    "material": {
+                        "type": "fluid",
+                        "density": 1000.0,
+                        "stiffness": 2.0e4,
+                        "gamma": 7.0,
+                        "viscosity": 0.5,
+                        "min_pressure": 0.0,
+                    },
+                }
+            ],
+        }
+    )
+
+
+def interleaved(sims: dict[str, Simulation], steps: int, rounds: int) -> dict[str, dict]:
+    """Advances every simulation by ``steps`` in ``rounds`` alternating chunks; per simulation the
+    wall time (s), particle-steps per second and seconds per stage."""
+    chunk = max(1, steps // rounds)
+    wall = dict.fromkeys(sims, 0.0)
+    before = {k: s.stage_times() for k, s in sims.items()}
+    done = 0
+    while done < steps:
+        n = min(chunk, steps - done)
+        for k, sim in sims.items():
+            t = time.perf_counter()
+            sim.step(n)
+            wall[k] += time.perf_counter() - t
+        done += n
+    out = {}
+    for k, sim in sims.items():
+        after = sim.stage_times()
+        out[k] = {
+            "seconds": wall[k],
+            "steps": steps,
+            "particles": sim.num_particles,
+            "particle_steps_per_s": sim.num_particles * steps / wall[k],
+            "stages_s": {s: after[s] - before[k][s] for s in STAGES},
+        }
+    return out
+
+
+def bench_fig1(path: Path, steps: int, threads: int) -> list[dict]:
+    """Fig. 1, both methods interleaved; wall time scaled to the paper's 10,000 steps."""
+    scene = load_scene(path)
+    sims = {m: Simulation(scene, m, threads=threads) for m in METHODS}
+    result = interleaved(sims, steps, rounds=4)
+    rows = []
+    for m in METHODS:
+        r = result[m]
+        seconds = r["seconds"] * FIG1_STEPS / steps
+        rows.append(
+            {
+                "case": "fig1",
+                "method": m,
+                "threads": threads,
+                **r,
+                "seconds_10k_steps": seconds,
+                "speedup_vs_authors": AUTHORS_FIG1_SECONDS[m] / seconds,
+            }
+        )
+    return rows
+
+
+def bench_dam_break(resolution: int, steps: int, threads: tuple[int, ...]) -> list[dict]:
+    """One size: every method × thread count interleaved, after 3 warm-up steps each."""
+    scene = dam_break_scene(resolution)
+    sims = {(m, t): Simulation(scene, m, threads=t) for m in METHODS for t in threads}
+    for sim in sims.values():
+        sim.step(3)
+    named = {f"{m}/{t}": s for (m, t), s in sims.items()}
+    result = interleaved(named, steps, rounds=4)
+    rows = []
+    for m, t in sims:
+        r = result[f"{m}/{t}"]
+        row = {"case": f"dam_break_{resolution}", "method": m, "threads": t, "precision": "f64", **r}
+        row["augmented_over_naive"] = r["seconds"] / result[f"naive/{t}"]["seconds"]
+        if 1 in threads:
+            row["speedup_over_1_thread"] = result[f"{m}/1"]["seconds"] / r["seconds"]
+        row["memory"] = _memory_in_subprocess(resolution, m)
+        rows.append(row)
+    return rows
+
+
+def _memory_in_subprocess(resolution: int, method: str) -> dict:
+    """Peak memory of building and stepping one dam break, in a fresh process."""
+    base = _worker(["baseline"])
+    run = _worker(["memory", str(resolution), method])
+    peak = run["max_rss"] - base["max_rss"]
+    n = run["particles"]
+    return {
+        "peak_bytes": peak,
+        "peak_bytes_per_particle": peak / n,
+        "accounted": run["accounted"],
+        "per_particle_without_grid": (run["accounted"]["particles"] + run["accounted"]["particle_scratch"]) / n,
+    }
+
+
+def _worker(args: list[str]) -> dict:
+    out = subprocess.run(
+        [sys.executable, "-m", "augmpm.bench", *args], capture_output=True, text=True, check=True, env=os.environ
+    )
+    return json.loads(out.stdout)
+
+
+def _max_rss_bytes() -> int:
+    """Peak resident set of this process (bytes). Linux's ``ru_maxrss`` survives ``exec`` and so
+    starts at the parent's size; ``VmHWM`` belongs to this process's own address space."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
+def bench_output(path: Path, steps: int, threads: int) -> list[dict]:
+    """A paper-scene run with every output against the same run without rendering or files."""
+    from augmpm.run import run_scene
+
+    scene = load_scene(path)
+    rows = []
+    for m in METHODS:
+        with tempfile.TemporaryDirectory() as tmp:
+            sim = Simulation(scene, m, threads=threads)
+            t = time.perf_counter()
+            sim.step(steps)
+            bare = time.perf_counter() - t
+            t = time.perf_counter()
+            run_scene(scene, Path(tmp) / "run", method=m, steps=steps, progress=False, threads=threads)
+            full = time.perf_counter() - t
+        rows.append(
+            {
+                "case": "output",
+                "method": m,
+                "threads": threads,
+                "steps": steps,
+                "frames": steps // scene.time.output_interval + 1,
+                "simulation_s": bare,
+                "run_with_output_s": full,
+                "output_fraction": max(0.0, full - bare) / full,
+            }
+        )
+    return rows
+
+
+def run_bench(
+    quick: bool = False,
+    fig1: Path = DEFAULT_FIG1,
+    threads: int | None = None,
+    sizes: tuple[int, ...] | None = None,
+    log=print,
+) -> dict:
+    """Every case; returns the report (also what ``--json`` writes)."""
+    from augmpm import _core
+    from augmpm.simulation import resolve_threads
+
+    if not fig1.is_file():
+        raise _core.SceneError(f"--fig1: {fig1} not found (run from the repository root, or pass the scene's path)")
+    threads = resolve_threads(threads)
+    sizes = sizes or ((128, 256) if quick else (128, 256, 512))
+    thread_counts = tuple(sorted({1, threads}))
+    report = {"machine": _machine(threads), "quick": quick, "rows": []}
+    log(f"fig1 ({fig1}), {2_000 if quick else FIG1_STEPS} steps, naive and augmented …")
+    report["rows"] += bench_fig1(fig1, 2_000 if quick else FIG1_STEPS, threads)
+    steps = {128: 200, 256: 60, 512: 20} if quick else {128: 1000, 256: 300, 512: 60}
+    for res in sizes:
+        log(f"dam break {res}², {steps[res]} steps, threads {thread_counts} …")
+        report["rows"] += bench_dam_break(res, steps[res], thread_counts)
+    log("output cost (fig1 with frames, images and animation) …")
+    report["rows"] += bench_output(fig1, 1_000 if quick else FIG1_STEPS, threads)
+    return report
+
+
+def _machine(threads: int) -> dict:
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
+    cpu = "unknown"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {
+        "date": datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        "commit": commit.stdout.strip() or "unknown",
+        "cpu": cpu,
+        "cores": os.cpu_count(),
+        "threads": threads,
+        "python": platform.python_version(),
+    }
+
+
+def format_report(report: dict) -> str:
+    """Markdown tables of a report."""
+    m = report["machine"]
+    lines = [f"Machine: {m['cpu']}, {m['cores']} cores; {m['date']}, commit {m['commit']}.", ""]
+    fig1 = [r for r in report["rows"] if r["case"] == "fig1"]
+    if fig1:
+        lines += [
+            "| Fig. 1 scene | threads | steps run | time for 10,000 steps (s) | authors (s) | speed-up |",
+            "|---|---|---|---|---|---|",
+        ]
+        for r in fig1:
+            lines.append(
+                f"| {r['method']} | {r['threads']} | {r['steps']} | {r['seconds_10k_steps']:.2f} "
+                f"| {AUTHORS_FIG1_SECONDS[r['method']]} | {r['speedup_vs_authors']:.1f}× |"
+            )
+        lines.append("")
+    dam = [r for r in report["rows"] if r["case"].startswith("dam_break")]
+    if dam:
+        lines += [
+            "| dam break | particles | method | threads | M particle-steps/s | aug./naive | vs 1 thread "
+            "| peak B/particle (measured) | B/particle without grid |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ]
+        for r in dam:
+            speedup = f"{r['speedup_over_1_thread']:.2f}×" if "speedup_over_1_thread" in r else "–"
+            mem = r["memory"]
+            lines.append(
+                f"| {r['case'].removeprefix('dam_break_')}² | {r['particles']:,} | {r['method']} | {r['threads']} "
+                f"| {r['particle_steps_per_s'] / 1e6:.1f} | {r['augmented_over_naive']:.2f} | {speedup} "
+                f"| {mem['peak_bytes_per_particle']:.0f} | {mem['per_particle_without_grid']:.0f} |"
+            )
+        lines += ["", "| stage split (% of step) | " + " | ".join(STAGES) + " |", "|---|" + "---|" * len(STAGES)]
+        for r in dam + fig1:
+            total = sum(r["stages_s"].values()) or 1.0
+            cells = " | ".join(f"{100 * r['stages_s'][s] / total:.0f}" for s in STAGES)
+            lines.append(f"| {r['case']} {r['method']} {r['threads']}t | {cells} |")
+        lines.append("")
+    out = [r for r in report["rows"] if r["case"] == "output"]
+    if out:
+        lines += ["| output cost (Fig. 1) | steps | frames | simulation (s) | with output (s) | output share |"]
+        lines += ["|---|---|---|---|---|---|"]
+        for r in out:
+            lines.append(
+                f"| {r['method']} | {r['steps']} | {r['frames']} | {r['simulation_s']:.2f} "
+                f"| {r['run_with_output_s']:.2f} | {100 * r['output_fraction']:.0f}% |"
+            )
+    return "\n".join(lines)
+
+
+def _main_worker(argv: list[str]) -> None:
+    """Subprocess entry of the memory measurement (``python -m augmpm.bench memory RES METHOD``)."""
+    if argv[0] == "baseline":
+        print(json.dumps({"max_rss": _max_rss_bytes()}))
+        return
+    _, res, method = argv
+    sim = Simulation(dam_break_scene(int(res)), method)
+    sim.step(2)
+    print(json.dumps({"max_rss": _max_rss_bytes(), "particles": sim.num_particles, "accounted": sim.memory_use()}))
+
+
+if __name__ == "__main__":
+    _main_worker(sys.argv[1:])

@@ -1,0 +1,57 @@
+"""``augmpm bench``: its scenes, its measurements and its report."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from augmpm import bench
+from augmpm.scene import load_scene
+
+from .conftest import ROOT
+
+
+@pytest.mark.parametrize("resolution", [128, 256, 512])
+def test_rust_bench_scenes_match_the_generator(resolution):
+    """benches/scenes/*.json (read by the criterion benches) are what augmpm.bench generates."""
+    committed = json.loads((ROOT / "benches" / "scenes" / f"dam_break_{resolution}.json").read_text())
+    assert committed == json.loads(bench.dam_break_scene(resolution).to_json())
+
+
+def test_rust_fig1_scene_matches_the_paper_scene():
+    committed = json.loads((ROOT / "benches" / "scenes" / "fig1_fluid_incline_noslip.json").read_text())
+    assert committed == json.loads(load_scene(ROOT / "scenes" / "paper" / "fluid_incline_noslip.toml").to_json())
+
+
+def test_dam_break_sizes_and_walls():
+    """The smallest dam break has ~8k particles, and its water column lies along inclined walls:
+    about a tenth of its particles start within two cells of a wall (their MLS systems see it)."""
+    from augmpm.simulation import Simulation
+
+    sim = Simulation(bench.dam_break_scene(128), "augmented")
+    assert 7_000 < sim.num_particles < 9_000
+    near = sim.wall_distance(sim.positions) > -2 * sim.cell_size
+    assert near.mean() > 0.05
+
+
+def test_fig1_bench_and_report(monkeypatch):
+    """A short Fig. 1 measurement scales to 10,000 steps and formats into the README's tables."""
+    rows = bench.bench_fig1(ROOT / "scenes" / "paper" / "fluid_incline_noslip.toml", steps=40, threads=1)
+    assert [r["method"] for r in rows] == ["naive", "augmented"]
+    for r in rows:
+        assert r["particles"] > 1_000 and r["particle_steps_per_s"] > 0
+        assert r["seconds_10k_steps"] == pytest.approx(r["seconds"] * 10_000 / 40)
+        authors = bench.AUTHORS_FIG1_SECONDS[r["method"]]
+        assert r["speedup_vs_authors"] == pytest.approx(authors / r["seconds_10k_steps"])
+    report = {"machine": bench._machine(1), "quick": True, "rows": rows}
+    text = bench.format_report(report)
+    assert "| naive | 1 | 40 |" in text and "| augmented | 1 | 40 |" in text
+
+
+def test_memory_is_measured_in_a_fresh_process():
+    """Peak memory per particle of the 128² dam break: at least the 128 B of particle state
+    (plus the grid, ~17k nodes), and not absurd."""
+    m = bench._memory_in_subprocess(128, "naive")
+    assert 128 <= m["peak_bytes_per_particle"] < 2_000
+    assert 128 <= m["per_particle_without_grid"] < 200
