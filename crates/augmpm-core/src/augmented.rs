@@ -72,6 +72,8 @@ pub struct AugmentedGrid<const D: usize> {
     pub walls: Vec<WallCondition>,
     /// Exclusion distance δ (m).
     pub delta: Real,
+    /// Per cell (cell = node at its lower corner): the whole cell lies inside the material region.
+    cell_inside: Vec<bool>,
 }
 
 impl<const D: usize> AugmentedGrid<D> {
@@ -130,13 +132,35 @@ impl<const D: usize> AugmentedGrid<D> {
                 }
             }
         }
-        Self { points, included, closed_form, cell_start, cell_points, walls, delta }
+        // The signed distance is 1-Lipschitz: a cell whose centre lies deeper than its half-diagonal
+        // is inside.
+        let half_diagonal = 0.5 * layout.h * (D as Real).sqrt();
+        let cell_inside = (0..n)
+            .map(|i| {
+                let centre = layout.position(i).add_scalar(0.5 * layout.h);
+                region.distance(&centre).distance < -half_diagonal
+            })
+            .collect();
+        Self { points, included, closed_form, cell_start, cell_points, walls, delta, cell_inside }
     }
 
     /// Heap bytes of the boundary points, node flags and the per-cell index.
     pub fn heap_bytes(&self) -> usize {
         use crate::math::heap_bytes as b;
-        b(&self.points) + b(&self.included) + b(&self.closed_form) + b(&self.cell_start) + b(&self.cell_points)
+        b(&self.points)
+            + b(&self.included)
+            + b(&self.closed_form)
+            + b(&self.cell_start)
+            + b(&self.cell_points)
+            + b(&self.cell_inside)
+    }
+
+    /// Whether `x` certainly lies inside the material region (its whole cell does); a cheap
+    /// test before the exact distance to the walls.
+    #[inline]
+    pub fn surely_inside(&self, layout: &GridLayout<D>, x: &Vector<D>) -> bool {
+        let inv_h = 1.0 / layout.h;
+        layout.node_index(&std::array::from_fn(|k| floor_i64(x[k] * inv_h))).is_some_and(|c| self.cell_inside[c])
     }
 
     /// Number of regular nodes; boundary point `b` is grid point `num_nodes + b`.
@@ -264,6 +288,16 @@ impl<const D: usize> AugmentedGrid<D> {
         if self.takes_closed_form(layout, x, p)? {
             return Ok((MlsInverse::regular(layout.h), MlsKind::Regular, NearPoints::NONE));
         }
+        self.general_inverse::<Ops>(layout, x, p)
+    }
+
+    /// The general inverse of eq. (5) over the included nodes and boundary points at `x`.
+    pub fn general_inverse<Ops: DimOps<D>>(
+        &self,
+        layout: &GridLayout<D>,
+        x: &Vector<D>,
+        p: usize,
+    ) -> Result<(MlsInverse<D>, MlsKind, NearPoints), OutOfGrid> {
         let mut m = Moments::new();
         self.for_each_node(layout, x, p, &mut |_, w, d| m.add(w, &d))?;
         let mut near = NearPoints::NONE;
@@ -361,7 +395,7 @@ impl<const D: usize> WallParticles<D> {
             .with_min_len(if parallel { 256 } else { usize::MAX })
             .map(|((minv, near), &p)| {
                 let kind;
-                (*minv, kind, *near) = grid.particle_inverse::<Ops>(layout, &x[p as usize], p as usize)?;
+                (*minv, kind, *near) = grid.general_inverse::<Ops>(layout, &x[p as usize], p as usize)?;
                 Ok(u64::from(matches!(kind, MlsKind::Regularized | MlsKind::Isolated)))
             })
             .sum()

@@ -354,16 +354,32 @@ impl<const D: usize> Schedule<D> {
         let c = self.block_coord(b as usize);
         let lo: [usize; D] = std::array::from_fn(|k| c[k] * BLOCK);
         let span: [usize; D] = std::array::from_fn(|k| BLOCK.min(layout.dims[k] - lo[k]));
-        let total: usize = span.iter().product();
-        for j in 0..total {
-            let mut r = j;
-            let mut idx = 0;
-            for k in 0..D {
-                idx += (lo[k] + r % span[k]) * layout.strides()[k];
-                r /= span[k];
+        let strides = layout.strides();
+        // Rows along axis 0 (contiguous), the other axes counted like an odometer.
+        let mut at = [0usize; D];
+        loop {
+            let row: usize = (0..D).map(|k| (lo[k] + at[k]) * strides[k]).sum();
+            for i in 0..span[0] {
+                f(row + i * strides[0]);
             }
-            f(idx);
+            let mut k = 1;
+            loop {
+                if k >= D {
+                    return;
+                }
+                at[k] += 1;
+                if at[k] < span[k] {
+                    break;
+                }
+                at[k] = 0;
+                k += 1;
+            }
         }
+    }
+
+    /// Calls `f(node)` for every node of the given node blocks, in parallel.
+    pub fn for_each_node_of(&self, layout: &GridLayout<D>, blocks: &[u32], f: impl Fn(usize) + Sync) {
+        blocks.par_iter().with_min_len(self.min_len(MIN_BLOCKS)).for_each(|&b| self.for_each_node(layout, b, &f));
     }
 
     /// Sets `data` to `zero` on every node of the given node blocks (in parallel).

@@ -8,7 +8,7 @@ use crate::grid::{GridLayout, GridState};
 use crate::material::{ConstitutiveModel, Material};
 use crate::math::{Dim, DimOps, Real, Vector};
 use crate::particles::Particles;
-use crate::schedule::Schedule;
+use crate::schedule::{Disjoint, Schedule};
 use crate::transfer::{self, GridDensity, OutOfGrid, Transfer};
 use std::time::Instant;
 
@@ -260,9 +260,17 @@ where
         schedule.prepare(layout, &particles.x).map_err(left)?;
         density.resize(particles.len(), 0.0);
         let nodes = layout.num_nodes();
-        schedule.clear(layout, schedule.stale(), &mut grid.mass[..nodes], 0.0);
-        schedule.clear(layout, schedule.stale(), &mut grid.spline_mass[..nodes], 0.0);
-        schedule.clear(layout, schedule.stale(), &mut grid.momentum[..nodes], Vector::<D>::zeros());
+        {
+            let (mass, spline) =
+                (Disjoint::new(&mut grid.mass[..nodes]), Disjoint::new(&mut grid.spline_mass[..nodes]));
+            let momentum = Disjoint::new(&mut grid.momentum[..nodes]);
+            // SAFETY: node blocks do not overlap, and each is listed once.
+            schedule.for_each_node_of(layout, schedule.stale(), |i| unsafe {
+                mass.update(i, |m| *m = 0.0);
+                spline.update(i, |m| *m = 0.0);
+                momentum.update(i, |m| *m = Vector::<D>::zeros());
+            });
+        }
         grid.mass[nodes..].fill(0.0);
         grid.spline_mass[nodes..].fill(0.0);
         grid.momentum[nodes..].fill(Vector::<D>::zeros());

@@ -362,7 +362,7 @@ where
                         vn += vi * phi;
                         cn += vi * grad.transpose();
                     });
-                    held = hold_at_wall(region, xp, &mut vn);
+                    held = !g.surely_inside(layout, xp) && hold_at_wall(region, xp, &mut vn);
                 }
             }
             *vp = vn;
