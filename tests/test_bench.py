@@ -52,6 +52,6 @@ def test_fig1_bench_and_report(monkeypatch):
 def test_memory_is_measured_in_a_fresh_process():
     """Peak memory per particle of the 128² dam break: at least the 128 B of particle state
     (plus the grid, ~17k nodes), and not absurd."""
-    m = bench._memory_in_subprocess(128, "naive")
+    m = bench._memory_in_subprocess(128, "naive", "f64")
     assert 128 <= m["peak_bytes_per_particle"] < 2_000
     assert 128 <= m["per_particle_without_grid"] < 200

@@ -6,9 +6,9 @@ Cases (issue 5):
   10,000 steps (``--quick``: 2,000, scaled to 10,000) and compared with the authors' code
   (9.3 s naive, 32.3 s augmented, one thread of this machine kind; ``spec/paper-scenes.md``);
 - a fluid dam break in a tank tilted 20° to the grid (so that many particles sit next to
-  inclined walls) at three sizes, ~8k particles on 128², ~65k on 256², ~530k on 512²: naive and
-  augmented, on 1 and on 2 threads: particle-steps per second, the augmented/naive cost ratio,
-  the 2-thread speed-up, peak memory per particle, and the time split per stage;
+  inclined walls) at three sizes, ~8k particles on 128², ~65k on 256², ~530k on 512²: f64 and
+  f32, naive and augmented, on 1 and on 2 threads: particle-steps per second, the augmented/naive
+  cost ratio, the 2-thread speed-up, peak memory per particle, and the time split per stage;
 - the cost of output: a paper-scene run with every output (frames, images, animation) against the
   same run without.
 
@@ -42,6 +42,7 @@ DEFAULT_FIG1 = Path("scenes/paper/fluid_incline_noslip.toml")
 #: Dam-break sizes: grid resolution → (particles per cell, part of the tank's width filled).
 DAM_BREAK_SIZES = {128: (4, 0.22), 256: (4, 0.44), 512: (8, 0.44)}
 METHODS = ("naive", "augmented")
+PRECISIONS = ("f64", "f32")
 STAGES = ("sort", "density", "boundary", "p2g", "grid", "g2p")
 
 
@@ -140,29 +141,30 @@ def bench_fig1(path: Path, steps: int, threads: int) -> list[dict]:
 
 
 def bench_dam_break(resolution: int, steps: int, threads: tuple[int, ...]) -> list[dict]:
-    """One size: every method × thread count interleaved, after 3 warm-up steps each."""
-    scene = dam_break_scene(resolution)
-    sims = {(m, t): Simulation(scene, m, threads=t) for m in METHODS for t in threads}
-    for sim in sims.values():
-        sim.step(3)
-    named = {f"{m}/{t}": s for (m, t), s in sims.items()}
-    result = interleaved(named, steps, rounds=4)
+    """One size: every precision × method × thread count interleaved, after 3 warm-up steps each."""
+    configs = [(p, m, t) for p in PRECISIONS for m in METHODS for t in threads]
+    sims = {}
+    for p, m, t in configs:
+        scene = dam_break_scene(resolution).model_copy(update={"precision": p})
+        sims[f"{p}/{m}/{t}"] = Simulation(scene, m, threads=t)
+        sims[f"{p}/{m}/{t}"].step(3)
+    result = interleaved(sims, steps, rounds=4)
     rows = []
-    for m, t in sims:
-        r = result[f"{m}/{t}"]
-        row = {"case": f"dam_break_{resolution}", "method": m, "threads": t, "precision": "f64", **r}
-        row["augmented_over_naive"] = r["seconds"] / result[f"naive/{t}"]["seconds"]
+    for p, m, t in configs:
+        r = result[f"{p}/{m}/{t}"]
+        row = {"case": f"dam_break_{resolution}", "method": m, "threads": t, "precision": p, **r}
+        row["augmented_over_naive"] = r["seconds"] / result[f"{p}/naive/{t}"]["seconds"]
         if 1 in threads:
-            row["speedup_over_1_thread"] = result[f"{m}/1"]["seconds"] / r["seconds"]
-        row["memory"] = _memory_in_subprocess(resolution, m)
+            row["speedup_over_1_thread"] = result[f"{p}/{m}/1"]["seconds"] / r["seconds"]
+        row["memory"] = _memory_in_subprocess(resolution, m, p)
         rows.append(row)
     return rows
 
 
-def _memory_in_subprocess(resolution: int, method: str) -> dict:
+def _memory_in_subprocess(resolution: int, method: str, precision: str = "f64") -> dict:
     """Peak memory of building and stepping one dam break, in a fresh process."""
     base = _worker(["baseline"])
-    run = _worker(["memory", str(resolution), method])
+    run = _worker(["memory", str(resolution), method, precision])
     peak = run["max_rss"] - base["max_rss"]
     n = run["particles"]
     return {
@@ -289,15 +291,16 @@ def format_report(report: dict) -> str:
     dam = [r for r in report["rows"] if r["case"].startswith("dam_break")]
     if dam:
         lines += [
-            "| dam break | particles | method | threads | M particle-steps/s | aug./naive | vs 1 thread "
+            "| dam break | particles | precision | method | threads | M particle-steps/s | aug./naive | vs 1 thread "
             "| peak B/particle (measured) | B/particle without grid |",
-            "|---|---|---|---|---|---|---|---|---|",
+            "|---|---|---|---|---|---|---|---|---|---|",
         ]
         for r in dam:
             speedup = f"{r['speedup_over_1_thread']:.2f}×" if "speedup_over_1_thread" in r else "–"
             mem = r["memory"]
             lines.append(
-                f"| {r['case'].removeprefix('dam_break_')}² | {r['particles']:,} | {r['method']} | {r['threads']} "
+                f"| {r['case'].removeprefix('dam_break_')}² | {r['particles']:,} | {r['precision']} | {r['method']} "
+                f"| {r['threads']} "
                 f"| {r['particle_steps_per_s'] / 1e6:.1f} | {r['augmented_over_naive']:.2f} | {speedup} "
                 f"| {mem['peak_bytes_per_particle']:.0f} | {mem['per_particle_without_grid']:.0f} |"
             )
@@ -305,7 +308,8 @@ def format_report(report: dict) -> str:
         for r in dam + fig1:
             total = sum(r["stages_s"].values()) or 1.0
             cells = " | ".join(f"{100 * r['stages_s'][s] / total:.0f}" for s in STAGES)
-            lines.append(f"| {r['case']} {r['method']} {r['threads']}t | {cells} |")
+            label = f"{r['case']} {r.get('precision', 'f64')} {r['method']} {r['threads']}t"
+            lines.append(f"| {label} | {cells} |")
         lines.append("")
     out = [r for r in report["rows"] if r["case"] == "output"]
     if out:
@@ -324,8 +328,8 @@ def _main_worker(argv: list[str]) -> None:
     if argv[0] == "baseline":
         print(json.dumps({"max_rss": _max_rss_bytes()}))
         return
-    _, res, method = argv
-    sim = Simulation(dam_break_scene(int(res)), method)
+    _, res, method, precision = argv
+    sim = Simulation(dam_break_scene(int(res)).model_copy(update={"precision": precision}), method)
     sim.step(2)
     print(json.dumps({"max_rss": _max_rss_bytes(), "particles": sim.num_particles, "accounted": sim.memory_use()}))
 

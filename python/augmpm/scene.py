@@ -203,6 +203,8 @@ class Scene(_Strict):
     walls: list[Wall] = Field(default_factory=list)
     bodies: Annotated[list[Body], Field(min_length=1)]
     augmented: Augmented = Field(default_factory=Augmented)
+    #: Floating-point precision of the engine: "f64" (default) or "f32" (same code, single precision).
+    precision: Literal["f32", "f64"] = "f64"
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Scene:

@@ -229,9 +229,9 @@ impl Walls2 {
         }
         for (wall, w) in self.walls.iter().enumerate() {
             if let WallShape::Circle(c, side) = w {
-                let parts = (2.0 * std::f64::consts::PI * c.radius / h).ceil().max(8.0) as usize;
+                let parts = (2.0 * crate::math::PI * c.radius / h).ceil().max(8.0) as usize;
                 for k in 0..parts {
-                    let t = 2.0 * std::f64::consts::PI * k as Real / parts as Real;
+                    let t = 2.0 * crate::math::PI * k as Real / parts as Real;
                     let radial = Point::new(t.cos(), t.sin());
                     let n = if *side == Side::Outside { -radial } else { radial };
                     out.push(BoundaryPoint::new(c.center + radial * c.radius, n, n, wall));

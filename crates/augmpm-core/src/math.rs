@@ -7,8 +7,16 @@
 
 use nalgebra::{SMatrix, SVector};
 
-/// Floating-point type of the core (double precision throughout, for now).
+/// Floating-point type of the core: `f64`, or `f32` with the feature `f32` (the crate
+/// `augmpm-core-f32` compiles these same sources that way).
+#[cfg(not(feature = "f32"))]
 pub type Real = f64;
+/// Floating-point type of the core: `f64`, or `f32` with the feature `f32` (the crate
+/// `augmpm-core-f32` compiles these same sources that way).
+#[cfg(feature = "f32")]
+pub type Real = f32;
+/// π in the core's precision.
+pub const PI: Real = std::f64::consts::PI as Real;
 /// A point or vector in `D` dimensions (m, m/s, ...).
 pub type Vector<const D: usize> = SVector<Real, D>;
 /// A `D`×`D` tensor (deformation gradient, stress, velocity gradient).

@@ -167,6 +167,23 @@ pub struct Scene {
     pub bodies: Vec<BodySpec>,
     #[serde(default)]
     pub augmented: AugmentedSpec,
+    /// Floating-point precision of the engine that runs the scene.
+    #[serde(default)]
+    pub precision: Precision,
+}
+
+/// Floating-point precision: `f64` (default) or `f32`, each an engine compiled from the same sources.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Precision {
+    F32,
+    #[default]
+    F64,
+}
+
+impl Precision {
+    /// The precision this engine is compiled with.
+    pub const NATIVE: Self = if std::mem::size_of::<Real>() == 4 { Precision::F32 } else { Precision::F64 };
 }
 
 /// Settings of the augmented grid (`method = "augmented"`).
@@ -433,6 +450,12 @@ impl Scene {
 
     /// Validates the scene and builds the simulation. Returns warnings beside it.
     pub fn build(&self, method: Method) -> Result<(Simulation<2>, Vec<String>), SceneError> {
+        if self.precision != Precision::NATIVE {
+            return Err(SceneError::new(
+                "precision",
+                format!("this engine runs {:?} scenes, not {:?}", Precision::NATIVE, self.precision),
+            ));
+        }
         finite("gravity", &self.gravity)?;
         let (layout, region, boundary) = self.build_walls(method)?;
         let h = layout.h;
@@ -527,7 +550,7 @@ fn seed_body(
             }
             let circle = Circle { center: point(center), radius: *radius };
             let r = Point::repeat(*radius);
-            let area = std::f64::consts::PI * radius * radius;
+            let area = crate::math::PI * radius * radius;
             (area, circle.center - r, circle.center + r, Box::new(move |p| circle.contains(p)))
         }
     };
@@ -550,7 +573,9 @@ fn seed_body(
     for j in 0..cells.y as i64 {
         for i in 0..cells.x as i64 {
             let corner = Point::new((first.x + i) as Real, (first.y + j) as Real) * spacing;
-            let p = corner + Point::new(rng.gen::<Real>(), rng.gen::<Real>()) * spacing;
+            // Drawn in f64 in either precision, so that f32 and f64 scenes seed the same particles.
+            let jitter = Point::new(rng.gen::<f64>() as Real, rng.gen::<f64>() as Real);
+            let p = corner + jitter * spacing;
             if inside(&p) {
                 positions.push(p);
             }

@@ -72,6 +72,15 @@ pub enum StepError {
     NonFinite { step: u64, particle: usize },
 }
 
+impl StepError {
+    /// The step and the particle the error names.
+    pub fn location(&self) -> (u64, usize) {
+        match *self {
+            StepError::LeftGrid { step, particle } | StepError::NonFinite { step, particle } => (step, particle),
+        }
+    }
+}
+
 /// Scratch arrays of a step, allocated once (they grow only with the particle count or the
 /// number of particles next to walls).
 struct Scratch<const D: usize> {

@@ -1,7 +1,6 @@
 //! The exception tree: `Error`, with `SceneError` (bad input) and
 //! `SimulationError` (a run that failed) under it.
 
-use augmpm_core::StepError;
 use pyo3::create_exception;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
@@ -29,11 +28,8 @@ pub fn scene_error(key: &str, reason: &str) -> PyErr {
     })
 }
 
-/// `SimulationError(message)` with attributes `step` and `particle`.
-pub fn simulation_error(e: StepError) -> PyErr {
-    let (step, particle) = match e {
-        StepError::LeftGrid { step, particle } | StepError::NonFinite { step, particle } => (step, particle),
-    };
+/// `SimulationError(message)` with attributes `step` and `particle`, from either precision's error.
+pub fn simulation_error(e: impl std::fmt::Display, (step, particle): (u64, usize)) -> PyErr {
     Python::with_gil(|py| {
         let err = SimulationError::new_err(e.to_string());
         let value = err.value(py);
