@@ -93,16 +93,27 @@ def dam_break_scene(resolution: int) -> Scene:
 
 def interleaved(sims: dict[str, Simulation], steps: int, rounds: int) -> dict[str, dict]:
     """Advances every simulation by ``steps`` in ``rounds`` alternating chunks; per simulation the
-    wall time (s), particle-steps per second and seconds per stage."""
+    wall time (s), particle-steps per second and seconds per stage. A simulation that fails is
+    dropped from later rounds and reported with its ``error``."""
+    from augmpm import _core
+
     chunk = max(1, steps // rounds)
     wall = dict.fromkeys(sims, 0.0)
+    done_steps = dict.fromkeys(sims, 0)
+    errors: dict[str, str] = {}
     before = {k: s.stage_times() for k, s in sims.items()}
     done = 0
     while done < steps:
         n = min(chunk, steps - done)
         for k, sim in sims.items():
+            if k in errors:
+                continue
             t = time.perf_counter()
-            sim.step(n)
+            try:
+                sim.step(n)
+                done_steps[k] += n
+            except _core.SimulationError as e:
+                errors[k] = str(e)
             wall[k] += time.perf_counter() - t
         done += n
     out = {}
@@ -110,11 +121,13 @@ def interleaved(sims: dict[str, Simulation], steps: int, rounds: int) -> dict[st
         after = sim.stage_times()
         out[k] = {
             "seconds": wall[k],
-            "steps": steps,
+            "steps": done_steps[k],
             "particles": sim.num_particles,
-            "particle_steps_per_s": sim.num_particles * steps / wall[k],
+            "particle_steps_per_s": sim.num_particles * done_steps[k] / wall[k] if k not in errors else math.nan,
             "stages_s": {s: after[s] - before[k][s] for s in STAGES},
         }
+        if k in errors:
+            out[k]["error"] = errors[k]
     return out
 
 
@@ -153,9 +166,10 @@ def bench_dam_break(resolution: int, steps: int, threads: tuple[int, ...]) -> li
     for p, m, t in configs:
         r = result[f"{p}/{m}/{t}"]
         row = {"case": f"dam_break_{resolution}", "method": m, "threads": t, "precision": p, **r}
-        row["augmented_over_naive"] = r["seconds"] / result[f"{p}/naive/{t}"]["seconds"]
-        if 1 in threads:
-            row["speedup_over_1_thread"] = result[f"{p}/{m}/1"]["seconds"] / r["seconds"]
+        naive, one = result[f"{p}/naive/{t}"], result[f"{p}/{m}/1"] if 1 in threads else None
+        row["augmented_over_naive"] = naive["particle_steps_per_s"] / r["particle_steps_per_s"]
+        if one is not None:
+            row["speedup_over_1_thread"] = r["particle_steps_per_s"] / one["particle_steps_per_s"]
         row["memory"] = _memory_in_subprocess(resolution, m, p)
         rows.append(row)
     return rows
@@ -298,6 +312,12 @@ def format_report(report: dict) -> str:
         for r in dam:
             speedup = f"{r['speedup_over_1_thread']:.2f}×" if "speedup_over_1_thread" in r else "–"
             mem = r["memory"]
+            if "error" in r:
+                lines.append(
+                    f"| {r['case'].removeprefix('dam_break_')}² | {r['particles']:,} | {r['precision']} "
+                    f"| {r['method']} | {r['threads']} | failed after {r['steps']} steps: {r['error']} | | | | |"
+                )
+                continue
             lines.append(
                 f"| {r['case'].removeprefix('dam_break_')}² | {r['particles']:,} | {r['precision']} | {r['method']} "
                 f"| {r['threads']} "
