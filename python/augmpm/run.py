@@ -8,6 +8,7 @@ and ``animation.mp4`` (or ``.gif``).
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import sys
 import time as wallclock
@@ -17,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from augmpm import _core
-from augmpm.render import FrameRenderer, write_animation
+from augmpm.render import FrameRenderer
 from augmpm.scene import Scene
 from augmpm.simulation import Method, Simulation
 from augmpm.vtk import write_pvd, write_vtp
@@ -76,13 +77,21 @@ def run_scene(
     )
     (out / "scene.toml").write_text(header + scene.to_toml(), encoding="utf-8")
 
-    renderer = FrameRenderer(scene, title=f"{scene.name} ({method})") if render else None
-    pngs: list[Path] = []
+    renderer = None
+    if render:
+        # Frames go to the animation as they are drawn, so the PNGs are not read back at the end.
+        renderer = FrameRenderer(
+            scene, title=f"{scene.name} ({method})", animation=out / f"animation.{animation}" if animation else None
+        )
     vtk_frames: list[tuple[float, str]] = []
     error = None
     start = wallclock.perf_counter()
     bar = _progress(total, progress)
-    with open(out / "metrics.csv", "w", newline="", encoding="utf-8") as fh:
+    # The renderer is closed also on an interrupt, so that the frames drawn so far make a playable animation.
+    with (
+        open(out / "metrics.csv", "w", newline="", encoding="utf-8") as fh,
+        contextlib.closing(renderer) if renderer is not None else contextlib.nullcontext(),
+    ):
         writer = csv.DictWriter(fh, fieldnames=METRIC_COLUMNS)
         writer.writeheader()
 
@@ -97,9 +106,7 @@ def run_scene(
             vtk_frames.append((sim.time, f"vtk/{name}.vtp"))
             write_pvd(out / "particles.pvd", vtk_frames)
             if renderer is not None:
-                png = out / "frames" / f"{name}.png"
-                renderer.draw(x, body, sim.time, png)
-                pngs.append(png)
+                renderer.draw(x, body, sim.time, out / "frames" / f"{name}.png")
 
         frame = 0
         output(frame)
@@ -116,10 +123,6 @@ def run_scene(
             output(frame)
             bar.update(n)
     bar.close()
-    if renderer is not None:
-        renderer.close()
-        if animation and pngs:
-            write_animation(pngs, out / f"animation.{animation}")
     return RunResult(
         out=out,
         frames=len(vtk_frames),

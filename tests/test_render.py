@@ -1,0 +1,126 @@
+"""Frames put walls and particles at the pixels their world positions map to, with y pointing up."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from augmpm.render import COLOURS, FrameRenderer, image_size, write_png
+from augmpm.scene import Scene
+
+WALL_GREY = round(0.85 * 255)  # the shaded wall side, facecolor "0.85"
+
+
+def _pixel_centre(scene: Scene, col: int, row: int, size_px: int = 640) -> list[float]:
+    """World position (m) of the centre of pixel (col, row), row 0 at the top; the domain fills the image."""
+    lx, ly = scene.grid.domain
+    width, height = image_size(scene, size_px)
+    return [(col + 0.5) / width * lx, (height - row - 0.5) / height * ly]
+
+
+def test_frame_colours_wall_side_grey_and_particle_pixels_by_body(small_scene, tmp_path):
+    """The wall side is grey, the fluid side white, and a particle of body b colours its own pixel tab10[b].
+
+    The small scene's polygon wall runs from (0.05, 0.3) to (0.95, 0.05) along the bottom, so (0.5, 0.05) lies
+    on the wall side and (0.5, 0.6) inside. A body-1 particle near the bottom must land near the bottom of the
+    image (y up) and a dot must not reach 4 px.
+    """
+    scene = Scene.from_dict(small_scene)
+    renderer = FrameRenderer(scene, title="test")
+    up, down = _pixel_centre(scene, 200, 100), _pixel_centre(scene, 400, 500)
+    x = np.array([up, down])
+    path = tmp_path / "frame.png"
+    renderer.draw(x, np.array([0, 1]), 0.25, path)
+    renderer.close()
+
+    img = np.asarray(Image.open(path).convert("RGB"))
+    assert img.shape == (640, 640, 3)
+    col, row = (round(v) for v in renderer.to_pixel(np.array([[0.5, 0.05]]))[0])
+    assert row > 600  # y = 0.05 m is near the bottom of the image
+    np.testing.assert_allclose(img[row, col], [WALL_GREY] * 3, atol=1)
+    col, row = (round(v) for v in renderer.to_pixel(np.array([[0.5, 0.6]]))[0])
+    assert (img[row, col] == 255).all()
+    assert (img[100, 200] == COLOURS[0]).all()
+    assert (img[500, 400] == COLOURS[1]).all()
+    assert (img[100, 196] == 255).all() and (img[104, 200] == 255).all()
+
+
+@pytest.mark.parametrize(
+    ("domain", "resolution", "height"), [([1.0, 1.0], 16, 640), ([2.0, 1.0], 16, 320), ([1.0, 5 / 12], 12, 272)]
+)
+def test_frame_height_is_domain_aspect_rounded_to_16_px(small_scene, domain, resolution, height, tmp_path):
+    """A frame is size_px wide and as high as the domain's aspect gives, rounded to a multiple of 16 for libx264.
+
+    640 px x 5/12 = 266.7 px rounds to 272 = 17 x 16.
+    """
+    small_scene["grid"].update(domain=domain, resolution=resolution)
+    small_scene["walls"] = []
+    small_scene["bodies"][0].update(min=[0.1, 0.1], max=[0.2, 0.2])
+    scene = Scene.from_dict(small_scene)
+    renderer = FrameRenderer(scene)
+    renderer.draw(np.array([[0.15, 0.15]]), np.array([0]), 0.0, tmp_path / "f.png")
+    renderer.close()
+    assert Image.open(tmp_path / "f.png").size == (640, height)
+
+
+def test_png_writer_round_trips_every_pixel(tmp_path):
+    """write_png's file decodes (with PIL) to exactly the RGB array written."""
+    rgb = np.random.default_rng(0).integers(0, 256, size=(37, 53, 3), dtype=np.uint8)
+    write_png(tmp_path / "r.png", rgb)
+    back = Image.open(tmp_path / "r.png")
+    assert back.mode == "RGB"
+    np.testing.assert_array_equal(np.asarray(back), rgb)
+
+
+def test_frame_png_decodes_to_the_drawn_image_in_every_row_band(tmp_path):
+    """The PNG draw() writes, re-deflating only the row bands the particles and caption changed, decodes to image().
+
+    Particles spread over the whole height, one row band left untouched between them, so that bands copied
+    from the background and bands compressed afresh alternate.
+    """
+    scene = Scene.from_dict(_circle_wall_scene())
+    renderer = FrameRenderer(scene, title="bands")
+    rng = np.random.default_rng(1)
+    y = np.concatenate([rng.uniform(0.0, 0.45, 200), rng.uniform(0.55, 1.0, 200)])
+    x = np.column_stack([rng.uniform(0.0, 1.0, 400), y])
+    body = rng.integers(0, 12, 400)
+    renderer.draw(x, body, 1.5, tmp_path / "f.png")
+    renderer.close()
+    np.testing.assert_array_equal(np.asarray(Image.open(tmp_path / "f.png")), renderer.image(x, body, 1.5))
+
+
+def _circle_wall_scene() -> dict:
+    return {
+        "name": "bands",
+        "grid": {"domain": [1.0, 1.0], "resolution": 16},
+        "time": {"dt": 1e-3, "steps": 1, "output_interval": 1},
+        "walls": [{"type": "circle", "center": [0.5, 0.5], "radius": 0.3, "side": "outside"}],
+        "bodies": [
+            {
+                "shape": "box",
+                "min": [0.1, 0.1],
+                "max": [0.2, 0.2],
+                "material": {"type": "elastic", "density": 1000.0, "youngs_modulus": 1e5, "poisson_ratio": 0.3},
+            }
+        ],
+    }
+
+
+@pytest.mark.parametrize("suffix", ["mp4", "gif"])
+def test_animation_holds_every_drawn_frame_under_its_own_name(small_scene, suffix, tmp_path):
+    """Frames drawn with an animation path all end up in it, and no ``.partial`` file is left after close()."""
+    import imageio.v2 as imageio
+
+    scene = Scene.from_dict(small_scene)
+    path = tmp_path / f"animation.{suffix}"
+    renderer = FrameRenderer(scene, animation=path)
+    for i in range(3):
+        renderer.draw(np.array([[0.4 + 0.1 * i, 0.6]]), np.array([0]), 0.1 * i, tmp_path / f"f{i}.png")
+    assert not path.exists()  # written under the .partial name until close()
+    renderer.close()
+    assert sorted(p.name for p in tmp_path.glob("animation*")) == [path.name]
+    with imageio.get_reader(path) as reader:
+        frames = [f for f in reader]
+    assert len(frames) == 3
+    assert frames[0].shape[:2] == (640, 640)
