@@ -148,9 +148,18 @@ def _validate(args: argparse.Namespace) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
+    import subprocess
+
     from augmpm.bench import format_report, run_bench
 
-    report = run_bench(quick=args.quick, fig1=args.fig1, threads=args.threads, log=lambda s: print(s, file=sys.stderr))
+    try:
+        report = run_bench(
+            quick=args.quick, fig1=args.fig1, threads=args.threads, log=lambda s: print(s, file=sys.stderr)
+        )
+    except (_core.SimulationError, subprocess.CalledProcessError) as e:
+        detail = getattr(e, "stderr", None) or ""
+        print(f"augmpm: benchmark failed: {e}\n{detail}".rstrip(), file=sys.stderr)
+        return EXIT_FAILED_RUN
     print(format_report(report))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)

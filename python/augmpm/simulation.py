@@ -9,7 +9,7 @@ from typing import Literal
 import numpy as np
 
 from augmpm import _core
-from augmpm.scene import Scene, load_scene
+from augmpm.scene import Scene, _plain_error, load_scene
 
 Method = Literal["naive", "augmented"]
 
@@ -131,9 +131,9 @@ def resolve_threads(threads: int | None = None) -> int:
         try:
             threads = int(threads)
         except ValueError:
-            raise _core.SceneError(f"{THREADS_ENV}: must be a positive integer, got {threads!r}") from None
+            raise _plain_error(THREADS_ENV, f"must be a positive integer, got {threads!r}") from None
     if threads is None:
         return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     if not isinstance(threads, (int, np.integer)) or isinstance(threads, bool) or not 1 <= threads <= 1024:
-        raise _core.SceneError(f"{source}: must be an integer from 1 to 1024, got {threads!r}")
+        raise _plain_error(source, f"must be an integer from 1 to 1024, got {threads!r}")
     return int(threads)

@@ -81,11 +81,12 @@ impl_dim_ops!(2);
 impl_dim_ops!(3);
 
 /// `x.floor() as i64` without a libm call (x86-64's baseline has no rounding instruction):
-/// truncate, then step down for negative non-integers. NaN gives 0, as the cast does.
+/// truncate, then step down for negative non-integers. NaN gives 0 and ±∞ the extreme values, as the
+/// cast does (saturating, so no overflow).
 #[inline(always)]
 pub fn floor_i64(x: Real) -> i64 {
     let t = x as i64;
-    t - i64::from((t as Real) > x)
+    t.saturating_sub(i64::from((t as Real) > x))
 }
 
 /// Sets flush-to-zero and denormals-are-zero for the calling thread (x86-64; elsewhere a no-op).
@@ -147,6 +148,8 @@ mod tests {
             assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
         }
         assert_eq!(floor_i64(Real::NAN), 0);
+        assert_eq!(floor_i64(Real::INFINITY), i64::MAX);
+        assert_eq!(floor_i64(Real::NEG_INFINITY), i64::MIN);
     }
 
     #[test]

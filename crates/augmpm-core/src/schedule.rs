@@ -85,6 +85,29 @@ impl<'a, T> Disjoint<'a, T> {
     }
 }
 
+/// The stencil origins (grid coordinates, per axis `lo ..= hi`) a block's particles may have while
+/// the binning holds: the block's own nodes widened by [`SLACK`]. Scattering a particle outside it
+/// could race with another block of the same colour, so the scatter checks it.
+#[derive(Clone, Copy, Debug)]
+pub struct Reach<const D: usize> {
+    pub lo: [i64; D],
+    pub hi: [i64; D],
+}
+
+impl<const D: usize> Reach<D> {
+    /// Panics unless the stencil origin `base` is within reach: only a caller that moved particles
+    /// between steps without re-binning them can get here, and continuing would be a data race.
+    #[inline(always)]
+    pub fn check(&self, base: &[i64; D]) {
+        for k in 0..D {
+            assert!(
+                self.lo[k] <= base[k] && base[k] <= self.hi[k],
+                "particle moved out of its block since it was binned; call Schedule::invalidate after moving particles"
+            );
+        }
+    }
+}
+
 /// Particles sorted by block, the non-empty blocks by colour, and the active node blocks.
 #[derive(Clone, Debug)]
 pub struct Schedule<const D: usize> {
@@ -262,8 +285,8 @@ impl<const D: usize> Schedule<D> {
             },
         );
 
-        // Non-empty blocks by colour, and the node blocks their stencils reach (block k and k + 1
-        // per axis). Blocks are visited in index order with their coordinates counted along.
+        // Non-empty blocks by colour, and the node blocks their stencils reach (blocks k − 1 ..= k + 1
+        // per axis, the slack included). Blocks are visited in index order with their coordinates counted along.
         let colours = 1usize << D;
         const { assert!(D <= 3, "at most 8 colours") };
         let colour_of = |c: &[usize; D]| (0..D).map(|k| (c[k] & 1) << k).sum::<usize>();
@@ -320,12 +343,20 @@ impl<const D: usize> Schedule<D> {
         Ok(())
     }
 
-    /// Calls `f` with the particles of every non-empty block, colour after colour; the blocks
-    /// of one colour run in parallel when the step is parallel.
-    pub fn for_each_block(&self, f: impl Fn(&[u32]) + Sync) {
+    /// Calls `f` with the particles of every non-empty block and the block's [`Reach`], colour
+    /// after colour; the blocks of one colour run in parallel when the step is parallel.
+    pub fn for_each_block(&self, f: impl Fn(&Reach<D>, &[u32]) + Sync) {
         for c in 0..(1usize << D) {
             let blocks = &self.coloured[self.colour_start[c]..self.colour_start[c + 1]];
-            let run = |&b: &u32| f(&self.order[self.start[b as usize] as usize..self.start[b as usize + 1] as usize]);
+            let run = |&b: &u32| {
+                let coord = self.block_coord(b as usize);
+                let slack = SLACK as i64;
+                let reach = Reach {
+                    lo: std::array::from_fn(|k| (coord[k] * BLOCK) as i64 - slack - crate::grid::GHOST),
+                    hi: std::array::from_fn(|k| (coord[k] * BLOCK + BLOCK - 1) as i64 + slack - crate::grid::GHOST),
+                };
+                f(&reach, &self.order[self.start[b as usize] as usize..self.start[b as usize + 1] as usize])
+            };
             if self.parallel {
                 blocks.par_iter().for_each(run);
             } else {
@@ -396,7 +427,7 @@ impl<const D: usize> Schedule<D> {
 #[inline]
 pub fn stencil_in_grid<const D: usize>(layout: &GridLayout<D>, x: &Vector<D>, inv_h: Real) -> bool {
     (0..D).all(|k| {
-        let o = floor_i64(x[k] * inv_h - 0.5) + crate::grid::GHOST;
+        let o = floor_i64(x[k] * inv_h - 0.5).saturating_add(crate::grid::GHOST);
         x[k].is_finite() && o >= 0 && (o as usize) + 2 < layout.dims[k]
     })
 }
@@ -407,7 +438,7 @@ fn block_of<const D: usize>(layout: &GridLayout<D>, block_dims: &[usize; D], x: 
     let mut key = 0usize;
     for k in (0..D).rev() {
         // Ghost-shifted node coordinate of the stencil's lowest node; the stencil needs o + 2 in the grid.
-        let o = floor_i64(x[k] * inv_h - 0.5) + crate::grid::GHOST;
+        let o = floor_i64(x[k] * inv_h - 0.5).saturating_add(crate::grid::GHOST);
         if !x[k].is_finite() || o < 0 || o as usize + 2 >= layout.dims[k] {
             return OUT_OF_GRID;
         }
@@ -440,7 +471,7 @@ mod tests {
         s.sort(&layout, &x).unwrap();
         let mut seen = vec![false; x.len()];
         let mut visited = 0;
-        s.for_each_block(|ps| {
+        s.for_each_block(|_, ps| {
             for w in ps.windows(2) {
                 assert!(w[0] < w[1]);
             }

@@ -316,7 +316,7 @@ where
         lap(&mut times.grid);
 
         let outcome = transfer::g2p(&t, model.region.as_ref(), &model.materials, &grid.momentum, particles, dt);
-        schedule.moved(outcome.max_speed * dt / layout.h);
+        schedule.moved(outcome.max_move / layout.h);
         lap(&mut times.g2p);
         self.held_at_wall += outcome.held_at_wall as u64;
         self.step = step;

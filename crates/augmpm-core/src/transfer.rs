@@ -32,9 +32,10 @@ pub fn scatter_mass<const D: usize>(
 ) {
     let out = Disjoint::new(grid_mass);
     let inv_h = 1.0 / layout.h;
-    schedule.for_each_block(|block| {
+    schedule.for_each_block(|reach, block| {
         for &p in block {
             let (s, origin) = stencil(layout, &x[p as usize], inv_h);
+            reach.check(&s.base);
             let mp = mass[p as usize];
             // SAFETY: blocks scattered together never share a node (see `schedule`).
             s.for_each(layout.h, |o, w, _| unsafe { out.update(origin + layout.offset(&o), |m| *m += w * mp) });
@@ -170,11 +171,12 @@ pub fn p2g<const D: usize>(
     let density_out = Disjoint::new(density);
     let (mass, spline, momentum) =
         (Disjoint::new(&mut grid.mass), Disjoint::new(&mut grid.spline_mass), Disjoint::new(&mut grid.momentum));
-    t.schedule.for_each_block(|block| {
+    t.schedule.for_each_block(|reach, block| {
         for &p in block {
             let p = p as usize;
             let x = particles.x[p];
             let (s, origin) = stencil(layout, &x, inv_h);
+            reach.check(&s.base);
             let rho = grid_density.map_or(0.0, |g| density_at(layout, &s, origin, g.grid_mass, g.wall_fraction));
             // SAFETY (every `update` below): each particle is in one block, and blocks scattered
             // together never share a grid point (see `schedule`).
@@ -283,13 +285,13 @@ pub fn grid_velocity<const D: usize>(
 }
 
 /// What G2P found: particles held at walls, the first particle that went non-finite and the
-/// first whose stencil left the grid, and the largest speed along an axis (m/s).
+/// first whose stencil left the grid, and the largest distance a particle moved along an axis (m).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct G2pOutcome {
     pub held_at_wall: usize,
     pub non_finite: Option<usize>,
     pub left_grid: Option<usize>,
-    pub max_speed: Real,
+    pub max_move: Real,
 }
 
 /// Per-particle results of G2P, reduced in any order to the same [`G2pOutcome`].
@@ -298,18 +300,18 @@ struct G2pSum {
     held: usize,
     non_finite: usize,
     left_grid: usize,
-    max_speed: Real,
+    max_move: Real,
 }
 
 impl G2pSum {
-    const NONE: Self = Self { held: 0, non_finite: usize::MAX, left_grid: usize::MAX, max_speed: 0.0 };
+    const NONE: Self = Self { held: 0, non_finite: usize::MAX, left_grid: usize::MAX, max_move: 0.0 };
 
     fn join(self, o: Self) -> Self {
         Self {
             held: self.held + o.held,
             non_finite: self.non_finite.min(o.non_finite),
             left_grid: self.left_grid.min(o.left_grid),
-            max_speed: self.max_speed.max(o.max_speed),
+            max_move: self.max_move.max(o.max_move),
         }
     }
 }
@@ -367,6 +369,7 @@ where
             }
             *vp = vn;
             *cp = cn;
+            let before = *xp;
             *xp += vn * dt;
             materials[*m as usize].update_deformation(fp, jpp, cp, dt);
             let finite = xp.iter().chain(vp.iter()).chain(fp.iter()).all(|a| a.is_finite());
@@ -374,7 +377,8 @@ where
                 held: usize::from(held),
                 non_finite: if finite { usize::MAX } else { p },
                 left_grid: if stencil_in_grid(layout, xp, inv_h) { usize::MAX } else { p },
-                max_speed: vn.amax(),
+                // The distance actually moved (rounding can move x by more than |v dt| in f32).
+                max_move: (*xp - before).amax(),
             }
         })
         .reduce(|| G2pSum::NONE, G2pSum::join);
@@ -383,7 +387,7 @@ where
         held_at_wall: sum.held,
         non_finite: first(sum.non_finite),
         left_grid: first(sum.left_grid),
-        max_speed: sum.max_speed,
+        max_move: sum.max_move,
     }
 }
 
@@ -580,5 +584,21 @@ mod tests {
         let (one, two) = (run(1), run(2));
         assert_eq!(one.mass, two.mass);
         assert_eq!(one.momentum, two.momentum);
+    }
+
+    /// A particle moved past its block's reach without re-binning is refused (a panic), never
+    /// scattered where another thread of the same colour may write.
+    #[test]
+    #[should_panic(expected = "moved out of its block")]
+    fn particles_moved_without_rebinning_are_refused() {
+        let layout = GridLayout::<2>::new(0.02, [50, 50]);
+        let mut ps = random_particles(100);
+        let mut schedule = Schedule::new(&layout);
+        schedule.sort(&layout, &ps.x).unwrap();
+        ps.x[7].x += 12.0 * layout.h; // more than a block (8) plus the slack (2)
+        let t = Transfer { layout: &layout, schedule: &schedule, augmented: None };
+        let mut grid = GridState::new(layout.num_nodes());
+        let mut density = vec![0.0; ps.len()];
+        p2g(&t, &dust(), &ps, None, &mut density, 1e-3, &mut grid);
     }
 }
