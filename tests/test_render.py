@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from augmpm.render import COLOURS, FrameRenderer, image_size, write_png
+from augmpm.render import COLOURS, FrameRenderer, image_size
 from augmpm.scene import Scene
 
 WALL_GREY = round(0.85 * 255)  # the shaded wall side, facecolor "0.85"
@@ -62,15 +62,6 @@ def test_frame_height_is_domain_aspect_rounded_to_16_px(small_scene, domain, res
     renderer.draw(np.array([[0.15, 0.15]]), np.array([0]), 0.0, tmp_path / "f.png")
     renderer.close()
     assert Image.open(tmp_path / "f.png").size == (640, height)
-
-
-def test_png_writer_round_trips_every_pixel(tmp_path):
-    """write_png's file decodes (with PIL) to exactly the RGB array written."""
-    rgb = np.random.default_rng(0).integers(0, 256, size=(37, 53, 3), dtype=np.uint8)
-    write_png(tmp_path / "r.png", rgb)
-    back = Image.open(tmp_path / "r.png")
-    assert back.mode == "RGB"
-    np.testing.assert_array_equal(np.asarray(back), rgb)
 
 
 def test_frame_png_decodes_to_the_drawn_image_in_every_row_band(tmp_path):

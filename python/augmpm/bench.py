@@ -19,6 +19,7 @@ configuration (peak resident set size over that of a process that only imported 
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -178,7 +179,7 @@ def bench_dam_break(resolution: int, steps: int, threads: tuple[int, ...]) -> li
 
 def _memory_in_subprocess(resolution: int, method: str, precision: str = "f64") -> dict:
     """Peak memory of building and stepping one dam break, in a fresh process."""
-    base = _worker(["baseline"])
+    base = _baseline()
     run = _worker(["memory", str(resolution), method, precision])
     peak = run["max_rss"] - base["max_rss"]
     n = run["particles"]
@@ -188,6 +189,12 @@ def _memory_in_subprocess(resolution: int, method: str, precision: str = "f64") 
         "accounted": run["accounted"],
         "per_particle_without_grid": (run["accounted"]["particles"] + run["accounted"]["particle_scratch"]) / n,
     }
+
+
+@functools.cache
+def _baseline() -> dict:
+    """Peak memory of a fresh process that only imported augmpm (measured once)."""
+    return _worker(["baseline"])
 
 
 def _worker(args: list[str]) -> dict:

@@ -110,15 +110,6 @@ def _png_rows(rgb: np.ndarray) -> bytes:
     return raw.tobytes()
 
 
-def write_png(path: Path, rgb: np.ndarray) -> None:
-    """Writes an RGB image (H, W, 3) of uint8 as a PNG: no row filter, zlib level 1.
-
-    PIL's encoder tries every row filter on RGB images, ~12 ms for a 640 px frame;
-    unfiltered rows at level 1 take ~3 ms and compress as well on these flat frames.
-    """
-    Path(path).write_bytes(_png(rgb.shape[1], rgb.shape[0], zlib.compress(_png_rows(rgb), 1)))
-
-
 class _BandPng:
     """PNG encoder for frames that differ from one background in a few bands of rows.
 

@@ -89,6 +89,11 @@ class Simulation:
         return self._sim.cell_size
 
     @property
+    def precision(self) -> str:
+        """Floating-point precision of the engine running the scene: "f64" or "f32"."""
+        return self._sim.precision
+
+    @property
     def threads(self) -> int:
         """Number of threads the steps run on (results do not depend on it)."""
         return self._sim.threads

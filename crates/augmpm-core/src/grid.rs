@@ -121,12 +121,6 @@ impl<const D: usize> GridState<D> {
         use crate::math::heap_bytes as b;
         b(&self.mass) + b(&self.spline_mass) + b(&self.momentum)
     }
-
-    pub fn clear(&mut self) {
-        self.mass.fill(0.0);
-        self.spline_mass.fill(0.0);
-        self.momentum.fill(Vector::<D>::zeros());
-    }
 }
 
 #[cfg(test)]

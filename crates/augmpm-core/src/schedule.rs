@@ -416,10 +416,8 @@ impl<const D: usize> Schedule<D> {
     /// Sets `data` to `zero` on every node of the given node blocks (in parallel).
     pub fn clear<T: Copy + Send + Sync>(&self, layout: &GridLayout<D>, blocks: &[u32], data: &mut [T], zero: T) {
         let out = Disjoint::new(data);
-        blocks.par_iter().with_min_len(self.min_len(MIN_BLOCKS)).for_each(|&b| {
-            // SAFETY: node blocks do not overlap, and each is listed once.
-            self.for_each_node(layout, b, |i| unsafe { out.update(i, |v| *v = zero) });
-        });
+        // SAFETY: node blocks do not overlap, and each is listed once.
+        self.for_each_node_of(layout, blocks, |i| unsafe { out.update(i, |v| *v = zero) });
     }
 }
 

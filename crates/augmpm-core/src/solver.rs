@@ -110,12 +110,6 @@ pub struct StageTimes {
     pub g2p: f64,
 }
 
-impl StageTimes {
-    pub fn total(&self) -> f64 {
-        self.sort + self.density + self.boundary + self.p2g + self.grid + self.g2p
-    }
-}
-
 /// Heap bytes held by a simulation, by what they scale with.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct MemoryUse {
