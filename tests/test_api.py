@@ -54,7 +54,7 @@ def test_wall_distance_is_signed(small_scene):
     sim = augmpm.Simulation(augmpm.Scene.from_dict(small_scene))
     d = sim.wall_distance(np.array([[0.5, 0.5], [0.5, 0.0]]))
     assert d[0] < 0 < d[1]
-    with pytest.raises(ValueError):
+    with pytest.raises(augmpm.SceneError, match="points: must have shape"):
         sim.wall_distance(np.zeros((2, 3)))
 
 

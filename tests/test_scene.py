@@ -57,7 +57,13 @@ BAD = [
         "walls[0]",
         "far",
     ),
-    ("seeding too dense for memory", "bodies.0.seeding", {"spacing": 1e-5}, "bodies[0].seeding", "raise the spacing"),
+    (
+        "seeding too dense for memory",
+        "bodies.0.seeding",
+        {"spacing": 1e-5},
+        "bodies[0].seeding",
+        "MiB of memory are available",
+    ),
 ]
 
 

@@ -11,7 +11,8 @@ import sys
 from pathlib import Path
 
 from augmpm import _core
-from augmpm.run import run_scene
+from augmpm.files import write_text
+from augmpm.run import CHECKPOINT_EVERY, resume_run, run_scene
 from augmpm.scene import load_scene
 
 EXIT_OK, EXIT_FAILED_RUN, EXIT_BAD_INPUT = 0, 1, 2
@@ -31,10 +32,22 @@ def _parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     r = sub.add_parser("run", help="run a scene file and write its outputs")
-    r.add_argument("scene", type=Path, help="scene file (TOML)")
+    r.add_argument("scene", type=Path, nargs="?", help="scene file (TOML); not with --resume")
+    r.add_argument(
+        "--resume",
+        type=Path,
+        metavar="DIR",
+        help="continue the interrupted run in DIR from its checkpoint, with the settings it was started with",
+    )
+    r.add_argument(
+        "--checkpoint-every",
+        type=int,
+        metavar="K",
+        help=f"write a checkpoint every K output frames (default {CHECKPOINT_EVERY}; 0: none)",
+    )
     r.add_argument("--out", type=Path, help="output directory (default: runs/<scene name>)")
     r.add_argument("--steps", type=int, help="number of steps (default: the scene's time.steps)")
-    r.add_argument("--method", choices=["naive", "augmented"], default="naive", help="wall boundary method")
+    r.add_argument("--method", choices=["naive", "augmented"], help="wall boundary method (default: naive)")
     r.add_argument(
         "--set",
         dest="overrides",
@@ -81,20 +94,48 @@ def _output_dir(path: Path) -> Path:
 
 
 def _run(args: argparse.Namespace) -> int:
-    if args.steps is not None and args.steps < 0:
-        raise _core.SceneError(f"--steps: must be non-negative, got {args.steps}")
-    scene = load_scene(args.scene, args.overrides)
-    out = _output_dir(args.out or Path("runs") / (scene.name or args.scene.stem))
-    result = run_scene(
-        scene,
-        out,
-        method=args.method,
-        steps=args.steps,
-        progress=not args.no_progress,
-        animation=None if args.no_render else ("gif" if args.gif else "mp4"),
-        render=not args.no_render,
-        threads=args.threads,
-    )
+    if args.checkpoint_every is not None and args.checkpoint_every < 0:
+        raise _core.SceneError(f"--checkpoint-every: must be non-negative, got {args.checkpoint_every}")
+    if args.resume is not None:
+        given = [
+            flag
+            for flag, value in [
+                ("SCENE", args.scene),
+                ("--out", args.out),
+                ("--steps", args.steps),
+                ("--method", args.method),
+                ("--set", args.overrides),
+                ("--gif", args.gif),
+                ("--no-render", args.no_render),
+            ]
+            if value
+        ]
+        if given:
+            raise _core.SceneError(
+                f"--resume: continues the run as it was started; {', '.join(given)} cannot be given with it"
+            )
+        out = args.resume
+        result = resume_run(
+            out, progress=not args.no_progress, threads=args.threads, checkpoint_every=args.checkpoint_every
+        )
+    else:
+        if args.scene is None:
+            raise _core.SceneError("SCENE: give a scene file, or --resume DIR")
+        if args.steps is not None and args.steps < 0:
+            raise _core.SceneError(f"--steps: must be non-negative, got {args.steps}")
+        scene = load_scene(args.scene, args.overrides)
+        out = _output_dir(args.out or Path("runs") / (scene.name or args.scene.stem))
+        result = run_scene(
+            scene,
+            out,
+            method=args.method or "naive",
+            steps=args.steps,
+            progress=not args.no_progress,
+            animation=None if args.no_render else ("gif" if args.gif else "mp4"),
+            render=not args.no_render,
+            threads=args.threads,
+            checkpoint_every=CHECKPOINT_EVERY if args.checkpoint_every is None else args.checkpoint_every,
+        )
     for w in result.warnings:
         print(f"augmpm: warning: {w}", file=sys.stderr)
     m = result.final_metrics
@@ -163,7 +204,7 @@ def _bench(args: argparse.Namespace) -> int:
     print(format_report(report))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(report, indent=2), encoding="utf-8")
+        write_text(args.json, json.dumps(report, indent=2))
         print(f"report written to {args.json}")
     return EXIT_OK
 
@@ -202,11 +243,17 @@ def main(argv: list[str] | None = None) -> int:
     except _core.SceneError as e:
         print(f"augmpm: bad input: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except _core.Error as e:  # SimulationError outside a run, or an internal error
+        print(f"augmpm: {e}", file=sys.stderr)
+        return EXIT_FAILED_RUN
     except OSError as e:
         print(f"augmpm: cannot write output: {e}", file=sys.stderr)
         return EXIT_FAILED_RUN
     except KeyboardInterrupt:
-        print("augmpm: interrupted; frames written so far are kept", file=sys.stderr)
+        print(
+            "augmpm: interrupted; frames written so far are kept (augmpm run --resume DIR continues a run)",
+            file=sys.stderr,
+        )
         return 130
     return EXIT_BAD_INPUT
 

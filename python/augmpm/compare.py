@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from augmpm.files import atomic_write
 from augmpm.render import write_animation
 from augmpm.run import RunResult, run_scene
 from augmpm.scene import Scene
@@ -68,7 +69,7 @@ def compare_scene(
                 row[f"{m}_max_penetration"] = float(metrics[m][i]["max_penetration"])
         rows.append(row)
     columns = ["step", "time"] + [f"{m}_{k}" for m in METHODS for k in ("n_outside", "max_penetration")]
-    with open(out / "comparison.csv", "w", newline="", encoding="utf-8") as fh:
+    with atomic_write(out / "comparison.csv", "w", encoding="utf-8") as fh:
         writer = csv.DictWriter(fh, fieldnames=columns, restval="")
         writer.writeheader()
         writer.writerows(rows)
@@ -92,7 +93,8 @@ def _plot(rows: list[dict[str, float]], path: Path, title: str) -> None:
     a.set(xlabel="time (s)", ylabel="particles outside the walls", title=title)
     b.set(xlabel="time (s)", ylabel="deepest penetration (cell widths)")
     a.legend()
-    fig.savefig(path, dpi=90)
+    with atomic_write(path) as fh:
+        fig.savefig(fh, format="png", dpi=90)
     plt.close(fig)
 
 

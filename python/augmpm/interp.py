@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from augmpm import _core
+from augmpm.files import save_png, write_text
 
 # shared/spec/paper-scenes.md, "Fig. 4: interpolation test".
 FIG4_POLYGON = [[0.059, 0.5], [0.941, 0.059], [0.941, 0.941], [0.059, 0.941]]
@@ -122,7 +123,6 @@ def interpolation_test(out: Path, resolution: int = 30, pixels: int = 300) -> li
         im = ax.imshow(err, origin="lower", extent=(0, 1, 0, 1), cmap="magma", vmin=0, vmax=0.5)
         ax.set_title(f"|error| {method} (cell widths)")
     fig.colorbar(im, ax=axes[1][1:], shrink=0.8)
-    fig.savefig(out / "interp_test.png", dpi=80)
-    plt.close(fig)
-    (out / "interp_test.json").write_text(json.dumps([asdict(r) for r in results], indent=2), encoding="utf-8")
+    save_png(fig, out / "interp_test.png")
+    write_text(out / "interp_test.json", json.dumps([asdict(r) for r in results], indent=2))
     return results

@@ -33,6 +33,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle, PathPatch, Polygon, Rectangle
 from PIL import Image, ImageDraw, ImageFont
 
+from augmpm.files import write_bytes
 from augmpm.scene import CircleWall, PolygonWall, Scene
 
 # tab10, as 8-bit RGB; particles of body b take colour b mod 10.
@@ -260,10 +261,15 @@ class FrameRenderer:
 
     def _write(self, x: np.ndarray, body: np.ndarray, time: float, path: Path) -> None:
         img, changed = self._compose(x, body, time)
-        path.write_bytes(self._png.encode(img, changed))
+        write_bytes(path, self._png.encode(img, changed))
         if self._animation is not None:
             self._animation.append_data(img)
             self._animation_frames += 1
+
+    def flush(self) -> None:
+        """Waits until every frame drawn so far is written."""
+        while self._pending:
+            self._pending.popleft().result()
 
     def close(self) -> None:
         """Waits for every frame's files, then finishes the animation and moves it to its own name."""
@@ -281,10 +287,13 @@ class FrameRenderer:
 
 
 def write_animation(frames: list[Path], path: Path, fps: int = 20) -> None:
-    """Joins PNG frames into ``.mp4`` (ffmpeg from imageio-ffmpeg) or ``.gif``."""
+    """Joins PNG frames into ``.mp4`` (ffmpeg from imageio-ffmpeg) or ``.gif``, written under a
+    ``.partial`` name and renamed when complete."""
     import imageio.v2 as imageio
 
-    with _open_writer(path, fps) as w:
+    partial = path.with_name(f"{path.stem}.partial{path.suffix}")
+    with _open_writer(partial, fps) as w:
         for f in frames:
             img = imageio.imread(f)
             w.append_data(img if path.suffix == ".gif" else img[..., :3])
+    partial.replace(path)

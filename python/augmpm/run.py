@@ -3,13 +3,25 @@
 Layout of DIR: ``scene.toml`` (the resolved scene), ``metrics.csv`` (one row
 per output frame), ``particles/frame_00000.npz`` (``x``, ``v``, ``body``),
 ``frames/frame_00000.png``, ``vtk/frame_00000.vtp`` with ``particles.pvd``,
-and ``animation.mp4`` (or ``.gif``).
+``animation.mp4`` (or ``.gif``), and ``checkpoint.npz`` (the state at the last
+checkpoint, from which :func:`resume_run` continues).
+
+Every file is written atomically (see :mod:`augmpm.files`). A frame's files are
+written first, then ``metrics.csv`` with the frame's row: a row in ``metrics.csv``
+means its frame is complete. A run killed at any moment leaves complete frames,
+rows for all of them but possibly the last, and a checkpoint; :func:`resume_run`
+removes what followed the checkpoint and continues, writing the same bytes the
+uninterrupted run would have written (the animation aside: it is encoded again
+from the PNG frames).
 """
 
 from __future__ import annotations
 
 import contextlib
 import csv
+import io
+import json
+import re
 import sys
 import time as wallclock
 from dataclasses import dataclass, field
@@ -18,8 +30,9 @@ from pathlib import Path
 import numpy as np
 
 from augmpm import _core
-from augmpm.render import FrameRenderer
-from augmpm.scene import Scene
+from augmpm.files import npz_bytes, remove_stale_temporaries, write_bytes, write_npz, write_text
+from augmpm.render import FrameRenderer, write_animation
+from augmpm.scene import Scene, _plain_error
 from augmpm.simulation import Method, Simulation
 from augmpm.vtk import write_pvd, write_vtp
 
@@ -33,6 +46,11 @@ METRIC_COLUMNS = [
     "low_mass_nodes",
     "held_at_wall",
 ]
+CHECKPOINT = "checkpoint.npz"
+#: Output frames between two checkpoints, unless the caller says otherwise.
+CHECKPOINT_EVERY = 10
+_CHECKPOINT_FORMAT = 1
+_FRAME = re.compile(r"frame_(\d+)\.")
 
 
 @dataclass
@@ -54,83 +72,217 @@ def run_scene(
     animation: str | None = "mp4",
     render: bool = True,
     threads: int | None = None,
+    checkpoint_every: int = CHECKPOINT_EVERY,
 ) -> RunResult:
     """Runs ``scene`` and writes its outputs into ``out``.
 
-    A failure of the simulation (non-finite state, a particle leaving the grid)
-    stops the run; every frame written before it is kept and the result's
-    ``error`` says at which step and why.
+    A failure of the simulation (non-finite state, a particle leaving the grid, an
+    unstable step) stops the run; every frame written before it is kept and the
+    result's ``error`` says at which step and why. A checkpoint is written at the
+    first frame and every ``checkpoint_every`` frames after it (0: none).
     """
     out = Path(out)
+    _check_every(checkpoint_every)
     sim = Simulation(scene, method, threads=threads)
     total = scene.time.steps if steps is None else steps
-    interval = scene.time.output_interval
     out.mkdir(parents=True, exist_ok=True)
-    for sub in ("particles", "frames", "vtk"):
-        (out / sub).mkdir(exist_ok=True)
-        # Frames of an earlier run into the same directory would mix with this one's.
-        for stale in (out / sub).glob("frame_*.*"):
-            stale.unlink()
+    remove_stale_temporaries(out)
+    (out / CHECKPOINT).unlink(missing_ok=True)
+    _remove_frames_after(out, -1)
     header = (
         f"# resolved scene; method = {method}, dt = {sim.dt!r} s, cell size h = {sim.cell_size!r} m, "
         f"{sim.num_particles} particles\n"
     )
-    (out / "scene.toml").write_text(header + scene.to_toml(), encoding="utf-8")
+    write_text(out / "scene.toml", header + scene.to_toml())
+    meta = {
+        "format": _CHECKPOINT_FORMAT,
+        "augmpm": _core.__version__,
+        "scene": scene.to_json(),
+        "method": method,
+        "total_steps": total,
+        "render": render,
+        "animation": animation,
+    }
+    return _Run(sim, out, meta, checkpoint_every, progress, rows=[], done=0, frame=0, resumed=False).go()
 
-    renderer = None
-    if render:
-        # Frames go to the animation as they are drawn, so the PNGs are not read back at the end.
-        renderer = FrameRenderer(
-            scene, title=f"{scene.name} ({method})", animation=out / f"animation.{animation}" if animation else None
+
+def resume_run(
+    out: str | Path, progress: bool = True, threads: int | None = None, checkpoint_every: int | None = None
+) -> RunResult:
+    """Continues the run in ``out`` from its checkpoint, with the settings it was started with.
+
+    Frames and rows after the checkpoint are removed and computed again; the frames,
+    ``metrics.csv`` and ``particles.pvd`` come out bitwise identical to those of a run that
+    was never interrupted, whatever the thread counts. Raises :class:`augmpm.SceneError`
+    when ``out`` holds no usable checkpoint.
+    """
+    out = Path(out)
+    meta, state = load_checkpoint(out / CHECKPOINT)
+    every = meta.get("checkpoint_every", CHECKPOINT_EVERY) if checkpoint_every is None else checkpoint_every
+    _check_every(every)
+    try:
+        scene = Scene.model_validate_json(meta["scene"])
+    except ValueError as e:
+        raise _plain_error("--resume", f"the checkpoint's scene is not valid: {e}") from None
+    sim = Simulation(scene, meta["method"], threads=threads)
+    sim.restore(state)
+    frame = int(meta["frame"])
+    rows = _read_metrics(out / "metrics.csv")
+    if len(rows) <= frame:
+        raise _plain_error("--resume", f"metrics.csv in {out} has {len(rows)} rows; the checkpoint is at frame {frame}")
+    rows = rows[: frame + 1]
+    if int(rows[-1]["step"]) != sim.steps_done:
+        raise _plain_error(
+            "--resume", f"metrics.csv row {frame} is step {rows[-1]['step']}; the checkpoint is at {sim.steps_done}"
         )
-    vtk_frames: list[tuple[float, str]] = []
-    error = None
-    start = wallclock.perf_counter()
-    bar = _progress(total, progress)
-    # The renderer is closed also on an interrupt, so that the frames drawn so far make a playable animation.
-    with (
-        open(out / "metrics.csv", "w", newline="", encoding="utf-8") as fh,
-        contextlib.closing(renderer) if renderer is not None else contextlib.nullcontext(),
-    ):
-        writer = csv.DictWriter(fh, fieldnames=METRIC_COLUMNS)
+    remove_stale_temporaries(out)
+    _remove_frames_after(out, frame)
+    for partial in out.glob("*.partial.*"):
+        partial.unlink()
+    run = _Run(sim, out, meta, every, progress, rows=rows, done=int(meta["done"]), frame=frame, resumed=True)
+    return run.go()
+
+
+class _Run:
+    """The loop of a run and its outputs."""
+
+    def __init__(
+        self,
+        sim: Simulation,
+        out: Path,
+        meta: dict,
+        checkpoint_every: int,
+        progress: bool,
+        rows: list[dict[str, str]],
+        done: int,
+        frame: int,
+        resumed: bool,
+    ) -> None:
+        self.sim, self.out, self.meta = sim, out, dict(meta)
+        self.meta["checkpoint_every"] = checkpoint_every
+        self.every, self.progress = checkpoint_every, progress
+        self.rows, self.done, self.frame, self.resumed = rows, done, frame, resumed
+        self.total = int(meta["total_steps"])
+        self.vtk_frames = [(float(r["time"]), f"vtk/frame_{i:05d}.vtp") for i, r in enumerate(rows)]
+        for sub in ("particles", "frames", "vtk"):
+            (out / sub).mkdir(exist_ok=True)
+
+    def go(self) -> RunResult:
+        sim, out, meta = self.sim, self.out, self.meta
+        scene = sim.scene
+        animation = meta["animation"] if meta["render"] else None
+        renderer = None
+        if meta["render"]:
+            # Frames go to the animation as they are drawn, so the PNGs are not read back at the end;
+            # a resumed run encodes it from the PNGs instead, as the earlier frames are not in memory.
+            stream = out / f"animation.{animation}" if animation and not self.resumed else None
+            renderer = FrameRenderer(scene, title=f"{scene.name} ({sim.method})", animation=stream)
+        self.renderer = renderer
+        error = None
+        start = wallclock.perf_counter()
+        bar = _progress(self.total, self.progress, initial=self.done)
+        interval = scene.time.output_interval
+        # The renderer is closed also on an interrupt, so that the frames drawn so far make a playable animation.
+        with contextlib.closing(renderer) if renderer is not None else contextlib.nullcontext():
+            if not self.resumed:
+                self.output()
+            while self.done < self.total:
+                n = min(interval, self.total - self.done)
+                try:
+                    sim.step(n)
+                except _core.SimulationError as e:
+                    error = str(e)
+                    break
+                self.done += n
+                self.frame += 1
+                self.output()
+                bar.update(n)
+        bar.close()
+        if renderer is not None and animation and self.resumed:
+            write_animation(sorted((out / "frames").glob("frame_*.png")), out / f"animation.{animation}")
+        return RunResult(
+            out=out,
+            frames=len(self.rows),
+            final_metrics=sim.metrics(),
+            wall_time=wallclock.perf_counter() - start,
+            error=error,
+            warnings=sim.warnings,
+        )
+
+    def output(self) -> None:
+        """Writes frame ``self.frame``: its files, then its row of ``metrics.csv``, then a checkpoint if due."""
+        sim, out = self.sim, self.out
+        x, v, body = sim.positions, sim.velocities, sim.body
+        name = f"frame_{self.frame:05d}"
+        write_npz(
+            out / "particles" / f"{name}.npz", {"x": x, "v": v, "body": body, "time": sim.time, "step": sim.steps_done}
+        )
+        write_vtp(out / "vtk" / f"{name}.vtp", x, {"velocity": v, "body": body})
+        self.vtk_frames.append((sim.time, f"vtk/{name}.vtp"))
+        write_pvd(out / "particles.pvd", self.vtk_frames)
+        if self.renderer is not None:
+            self.renderer.draw(x, body, sim.time, out / "frames" / f"{name}.png")
+        m = sim.metrics()
+        self.rows.append({k: m[k] for k in METRIC_COLUMNS})
+        buf = io.StringIO()
+        writer = csv.DictWriter(buf, fieldnames=METRIC_COLUMNS, lineterminator="\r\n")
         writer.writeheader()
+        writer.writerows(self.rows)
+        write_text(out / "metrics.csv", buf.getvalue())
+        if self.every and self.frame % self.every == 0:
+            if self.renderer is not None:
+                self.renderer.flush()  # the checkpoint must not be ahead of the PNGs it implies
+            meta = {**self.meta, "frame": self.frame, "done": self.done}
+            save_checkpoint(out / CHECKPOINT, sim, meta)
 
-        def output(frame: int) -> None:
-            m = sim.metrics()
-            writer.writerow({k: m[k] for k in METRIC_COLUMNS})
-            fh.flush()
-            x, v, body = sim.positions, sim.velocities, sim.body
-            name = f"frame_{frame:05d}"
-            np.savez(out / "particles" / f"{name}.npz", x=x, v=v, body=body, time=sim.time, step=sim.steps_done)
-            write_vtp(out / "vtk" / f"{name}.vtp", x, {"velocity": v, "body": body})
-            vtk_frames.append((sim.time, f"vtk/{name}.vtp"))
-            write_pvd(out / "particles.pvd", vtk_frames)
-            if renderer is not None:
-                renderer.draw(x, body, sim.time, out / "frames" / f"{name}.png")
 
-        frame = 0
-        output(frame)
-        done = 0
-        while done < total:
-            n = min(interval, total - done)
-            try:
-                sim.step(n)
-            except _core.SimulationError as e:
-                error = str(e)
-                break
-            done += n
-            frame += 1
-            output(frame)
-            bar.update(n)
-    bar.close()
-    return RunResult(
-        out=out,
-        frames=len(vtk_frames),
-        final_metrics=sim.metrics(),
-        wall_time=wallclock.perf_counter() - start,
-        error=error,
-        warnings=sim.warnings,
-    )
+def save_checkpoint(path: Path, sim: Simulation, meta: dict) -> None:
+    """Writes the simulation's state and ``meta`` (JSON) to ``path``, atomically and durably."""
+    state = sim.checkpoint()
+    arrays = {k: np.asarray(v) for k, v in state.items()}
+    arrays["meta"] = np.array(json.dumps(meta))
+    write_bytes(path, npz_bytes(arrays), durable=True)
+
+
+def load_checkpoint(path: Path) -> tuple[dict, dict[str, np.ndarray]]:
+    """The ``meta`` and the state of a checkpoint written by :func:`save_checkpoint`."""
+    if not path.is_file():
+        raise _plain_error(
+            "--resume", f"no checkpoint at {path} (the run stopped before its first one, or was not run there)"
+        )
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+        meta = json.loads(str(arrays.pop("meta")))
+    except (OSError, ValueError, KeyError) as e:
+        raise _plain_error("--resume", f"{path} is not a readable checkpoint: {e}") from None
+    missing = {"format", "scene", "method", "total_steps", "render", "animation", "frame", "done"} - set(meta)
+    if missing or meta["format"] != _CHECKPOINT_FORMAT:
+        raise _plain_error("--resume", f"{path} is not a checkpoint of this version (missing {sorted(missing)})")
+    return meta, arrays
+
+
+def _check_every(every: int) -> None:
+    if not isinstance(every, int) or isinstance(every, bool) or every < 0:
+        raise _plain_error("checkpoint_every", f"must be a non-negative integer of frames, got {every!r}")
+
+
+def _read_metrics(path: Path) -> list[dict[str, str]]:
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            return list(csv.DictReader(fh))
+    except OSError as e:
+        raise _plain_error("--resume", f"cannot read {path}: {e}") from None
+
+
+def _remove_frames_after(out: Path, frame: int) -> None:
+    """Removes the frame files numbered above ``frame`` (all of them for -1)."""
+    for sub in ("particles", "frames", "vtk"):
+        if (out / sub).is_dir():
+            for f in (out / sub).glob("frame_*.*"):
+                m = _FRAME.match(f.name)
+                if m and int(m.group(1)) > frame:
+                    f.unlink()
 
 
 class _NoBar:
@@ -141,9 +293,9 @@ class _NoBar:
         pass
 
 
-def _progress(total: int, enabled: bool):
+def _progress(total: int, enabled: bool, initial: int = 0):
     if not enabled:
         return _NoBar()
     from tqdm import tqdm
 
-    return tqdm(total=total, unit="step", file=sys.stderr, dynamic_ncols=True)
+    return tqdm(total=total, initial=initial, unit="step", file=sys.stderr, dynamic_ncols=True)

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -23,17 +24,50 @@ class Simulation:
     """
 
     def __init__(self, scene: Scene | str | Path, method: Method = "naive", threads: int | None = None) -> None:
+        if not isinstance(scene, (Scene, str, Path)):
+            raise _plain_error("scene", f"must be a Scene or the path of a scene file, got {type(scene).__name__}")
         if not isinstance(scene, Scene):
             scene = load_scene(scene)
+        if method not in ("naive", "augmented"):
+            raise _plain_error("method", f'must be "naive" or "augmented", got {method!r}')
         self.scene = scene
         self.method = method
-        self._sim = _core.Simulation(scene.to_json(), method, resolve_threads(threads))
+        self._sim = _core.Simulation(scene.to_json(), method, resolve_threads(threads), memory_limit())
 
     def step(self, n: int = 1) -> None:
-        """Advances ``n`` time steps; raises :class:`augmpm.SimulationError` if the state goes bad."""
-        if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 0:
-            raise _core.SceneError(f"n: must be a non-negative integer, got {n!r}")
+        """Advances ``n`` time steps; raises :class:`augmpm.SimulationError` if the state goes bad.
+
+        After a failure the state is that of the failing step, and every later call raises the
+        same error until a checkpoint is restored (:meth:`restore`).
+        """
+        if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or not 0 <= n < 2**63:
+            raise _plain_error("n", f"must be an integer from 0 to 2**63 - 1, got {n!r}")
         self._sim.step(int(n))
+
+    def checkpoint(self) -> dict[str, Any]:
+        """Everything that evolves during the run, as scalars and numpy arrays: with the same
+        scene and method, :meth:`restore` continues from it bitwise identically."""
+        return dict(self._sim.checkpoint())
+
+    def restore(self, state: Mapping[str, Any]) -> None:
+        """Continues from ``state``, a :meth:`checkpoint` of a simulation of the same scene and method.
+
+        A state that does not fit (missing entries, wrong shapes or types, particles that do not
+        match the grid) raises :class:`augmpm.SceneError` naming the entry, and changes nothing.
+        """
+        if not isinstance(state, Mapping):
+            raise _plain_error("state", f"must be a mapping from a checkpoint, got {type(state).__name__}")
+        arrays = {}
+        for key, value in state.items():
+            if key in _STATE_DTYPES:
+                try:
+                    value = np.ascontiguousarray(value, dtype=_STATE_DTYPES[key])
+                except (TypeError, ValueError, OverflowError) as e:
+                    raise _plain_error(f"state.{key}", f"not convertible to {_STATE_DTYPES[key]}: {e}") from None
+            elif isinstance(value, np.ndarray) and value.ndim == 0:
+                value = value.item()
+            arrays[str(key)] = value
+        self._sim.restore(arrays)
 
     @property
     def positions(self) -> np.ndarray:
@@ -117,14 +151,56 @@ class Simulation:
 
     def wall_distance(self, points: np.ndarray) -> np.ndarray:
         """Signed distance (m) of points (M, 2) to the walls, positive outside the material region."""
-        return self._sim.wall_distance(np.ascontiguousarray(points, dtype=np.float64))
+        try:
+            points = np.ascontiguousarray(points, dtype=np.float64)
+        except (TypeError, ValueError) as e:
+            raise _plain_error("points", f"must be an (M, 2) array of numbers: {e}") from None
+        if points.ndim != 2 or points.shape[1] != 2:
+            raise _plain_error("points", f"must have shape (M, 2), got {points.shape}")
+        return self._sim.wall_distance(points)
 
     def metrics(self) -> dict[str, float]:
-        """``step, time, kinetic_energy, n_outside, max_penetration`` (the last in cell widths)."""
+        """``step, time, kinetic_energy, n_outside, max_penetration`` (cell widths), the augmented
+        grid's counters ``ill_conditioned, low_mass_nodes, held_at_wall``, and ``max_cfl``: the
+        largest distance a particle moved in the last step, in cell widths."""
         return self._sim.metrics()
 
 
+# Dtypes of the arrays of a checkpoint (see Simulation.checkpoint); the rest are scalars.
+_STATE_DTYPES = {
+    **dict.fromkeys(["x", "v", "c", "f", "jp", "mass", "vol0", "density"], np.float64),
+    **dict.fromkeys(["body", "material", "bins"], np.uint32),
+}
+
 THREADS_ENV = "AUGMPM_THREADS"
+MEMORY_ENV = "AUGMPM_MEMORY_LIMIT"
+_UNITS = {"": 1, "K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
+
+
+def memory_limit() -> int:
+    """Bytes a simulation may take: ``$AUGMPM_MEMORY_LIMIT`` (e.g. ``512M``, ``8G``, or bytes) if
+    set, else the memory the system reports available (MemAvailable on Linux), else all of it."""
+    text = os.environ.get(MEMORY_ENV, "").strip()
+    if text:
+        number, unit = text.rstrip("KMGTkmgtBb"), text[len(text.rstrip("KMGTkmgtBb")) :].upper().rstrip("B")
+        try:
+            value = float(number) * _UNITS[unit]
+        except (KeyError, ValueError):
+            value = -1.0
+        if not 0 < value < 2**63:
+            raise _plain_error(MEMORY_ENV, f"must be a size such as 512M or 8G, got {text!r}")
+        return int(value)
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):
+        return 2**63 - 1
 
 
 def resolve_threads(threads: int | None = None) -> int:

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from augmpm.files import write_text
+
 _VTK_TYPES = {np.dtype(np.float64): "Float64", np.dtype(np.int32): "Int32", np.dtype(np.int64): "Int64"}
 
 
@@ -50,13 +52,14 @@ def write_vtp(path: Path, x: np.ndarray, point_data: dict[str, np.ndarray]) -> N
         f"<PointData>{''.join(arrays)}</PointData>\n"
         "</Piece></PolyData>\n</VTKFile>\n"
     )
-    path.write_text(xml, encoding="ascii")
+    write_text(path, xml, encoding="ascii")
 
 
 def write_pvd(path: Path, frames: list[tuple[float, str]]) -> None:
     """Writes the ``.pvd`` collection that lists each frame file with its time (s)."""
     rows = "\n".join(f'<DataSet timestep="{t!r}" part="0" file="{f}"/>' for t, f in frames)
-    path.write_text(
+    write_text(
+        path,
         '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n<Collection>\n'
         f"{rows}\n</Collection>\n</VTKFile>\n",
         encoding="ascii",

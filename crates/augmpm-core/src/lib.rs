@@ -23,5 +23,5 @@ pub mod solver;
 pub mod transfer;
 
 pub use boundary::{Method, WallCondition};
-pub use scene::{Scene, SceneError};
-pub use solver::{MemoryUse, Metrics, Model, Simulation, StageTimes, StepError};
+pub use scene::{MemoryEstimate, Scene, SceneError};
+pub use solver::{MemoryUse, Metrics, Model, Simulation, StageTimes, State, StepError};

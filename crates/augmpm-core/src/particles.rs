@@ -3,7 +3,7 @@
 use crate::math::{Matrix, Real, Vector};
 
 /// Material points. Every array has one entry per particle.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Particles<const D: usize> {
     /// Position (m).
     pub x: Vec<Vector<D>>,

@@ -215,10 +215,48 @@ impl Default for AugmentedSpec {
 
 /// Largest grid accepted (nodes, ghosts included): 16.7 M nodes, about 1 GB of node state.
 const MAX_GRID_NODES: u64 = 1 << 24;
-/// Bytes of state per grid node (mass, B-spline mass, momentum in 2D, flags), for the message.
-const GRID_BYTES_PER_NODE: u64 = 48;
+/// Bytes per grid node: mass, B-spline mass, momentum (2D), density mass, flags and blocks.
+const GRID_BYTES_PER_NODE: u64 = 6 * std::mem::size_of::<Real>() as u64;
 /// Largest number of jittered candidate points per body: 20 M particles need about 4 GB.
 const MAX_SEED_CANDIDATES: u64 = 20_000_000;
+
+/// Bytes per particle of a running simulation: the state (15 reals, body and material), the
+/// per-step scratch (density, binning, wall table) and the growth of the arrays while seeding.
+const PARTICLE_BYTES: u64 = 20 * std::mem::size_of::<Real>() as u64 + 16;
+
+/// What a scene will need in memory, estimated without allocating it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MemoryEstimate {
+    /// Bytes, particles and grid together.
+    pub bytes: u64,
+    /// Particles the bodies will be seeded with (from their areas).
+    pub particles: u64,
+    /// Grid nodes, ghosts included.
+    pub nodes: u64,
+    /// The scene key that drives the estimate: `grid.resolution` or the largest body's seeding.
+    pub key: String,
+}
+
+impl MemoryEstimate {
+    /// Fails, naming the key that drives the estimate, when it exceeds `available` bytes.
+    pub fn check(&self, available: u64) -> Result<(), SceneError> {
+        if self.bytes <= available {
+            return Ok(());
+        }
+        let mb = |b: u64| b.div_ceil(1 << 20);
+        Err(SceneError::new(
+            &self.key,
+            format!(
+                "the simulation would need about {} MiB ({} particles, {} grid nodes) but only {} MiB of memory \
+                 are available; lower grid.resolution or the seeding density",
+                mb(self.bytes),
+                self.particles,
+                self.nodes,
+                mb(available)
+            ),
+        ))
+    }
+}
 
 /// How the surface of one wall moves (its geometry stays still).
 #[derive(Clone, Copy, Debug)]
@@ -448,6 +486,48 @@ impl Scene {
         Ok((layout, region, boundary))
     }
 
+    /// Estimates the memory the simulation of this scene will take, without building it. Bodies
+    /// whose shape or seeding is invalid count no particles (building reports them).
+    pub fn memory_estimate(&self) -> Result<MemoryEstimate, SceneError> {
+        let layout = self.layout()?;
+        let nodes = layout.num_nodes() as u64;
+        let h = layout.h;
+        let mut particles = 0.0 as Real;
+        let mut largest = (0.0 as Real, None);
+        for (b, body) in self.bodies.iter().enumerate() {
+            let Ok(spacing) = seeding_spacing("", body, h) else { continue };
+            let area = match &body.shape {
+                BodyShape::Box { min, max } => (max[0] - min[0]) * (max[1] - min[1]),
+                BodyShape::Circle { radius, .. } => crate::math::PI * radius * radius,
+                BodyShape::Polygon { vertices, scale, .. } => {
+                    let n = vertices.len();
+                    let twice: Real = (0..n)
+                        .map(|i| {
+                            let (a, b) = (vertices[i], vertices[(i + 1) % n]);
+                            a[0] * b[1] - b[0] * a[1]
+                        })
+                        .sum();
+                    0.5 * twice.abs() * scale * scale
+                }
+            };
+            let count = area / (spacing * spacing);
+            if count.is_finite() && count > 0.0 {
+                particles += count;
+                if count > largest.0 {
+                    largest = (count, Some(b));
+                }
+            }
+        }
+        let particles = particles.min(u64::MAX as Real / PARTICLE_BYTES as Real) as u64;
+        let particle_bytes = particles * PARTICLE_BYTES;
+        let grid_bytes = nodes * GRID_BYTES_PER_NODE;
+        let key = match largest.1 {
+            Some(b) if particle_bytes > grid_bytes => format!("bodies[{b}].seeding"),
+            _ => "grid.resolution".to_string(),
+        };
+        Ok(MemoryEstimate { bytes: particle_bytes + grid_bytes, particles, nodes, key })
+    }
+
     /// Validates the scene and builds the simulation. Returns warnings beside it.
     pub fn build(&self, method: Method) -> Result<(Simulation<2>, Vec<String>), SceneError> {
         if self.precision != Precision::NATIVE {
@@ -497,6 +577,18 @@ impl Scene {
     }
 }
 
+/// Distance (m) between seeded particles of a body on cells of width `h` (default: 4 per cell).
+fn seeding_spacing(key: &str, body: &BodySpec, h: Real) -> Result<Real, SceneError> {
+    match (body.seeding.spacing, body.seeding.per_cell) {
+        (Some(s), None) if s.is_finite() && s > 0.0 => Ok(s),
+        (Some(s), None) => Err(SceneError::new(format!("{key}.seeding.spacing"), format!("must be positive, got {s}"))),
+        (None, Some(n)) if n > 0 => Ok(h / (n as Real).sqrt()),
+        (None, Some(_)) => Err(SceneError::new(format!("{key}.seeding.per_cell"), "must be at least 1")),
+        (None, None) => Ok(h / 2.0),
+        (Some(_), Some(_)) => Err(SceneError::new(format!("{key}.seeding"), "give spacing or per_cell, not both")),
+    }
+}
+
 /// Seeds one body on a jittered grid aligned with the domain origin.
 fn seed_body(
     key: &str,
@@ -506,18 +598,7 @@ fn seed_body(
     h: Real,
     out: &mut Particles<2>,
 ) -> Result<(), SceneError> {
-    let spacing = match (body.seeding.spacing, body.seeding.per_cell) {
-        (Some(s), None) if s.is_finite() && s > 0.0 => s,
-        (Some(s), None) => {
-            return Err(SceneError::new(format!("{key}.seeding.spacing"), format!("must be positive, got {s}")))
-        }
-        (None, Some(n)) if n > 0 => h / (n as Real).sqrt(),
-        (None, Some(_)) => return Err(SceneError::new(format!("{key}.seeding.per_cell"), "must be at least 1")),
-        (None, None) => h / 2.0,
-        (Some(_), Some(_)) => {
-            return Err(SceneError::new(format!("{key}.seeding"), "give spacing or per_cell, not both"))
-        }
-    };
+    let spacing = seeding_spacing(key, body, h)?;
     // Area (m²), bounding box and inside test of the body.
     type ShapeInfo = (Real, Point, Point, Box<dyn Fn(&Point) -> bool>);
     let (area, lo, hi, inside): ShapeInfo = match &body.shape {

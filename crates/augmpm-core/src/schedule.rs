@@ -220,13 +220,10 @@ impl<const D: usize> Schedule<D> {
     /// Bins the particles at `x` by block. Fails with the lowest-numbered particle whose
     /// stencil is not inside the grid. Allocates only when the particle count grows.
     pub fn sort(&mut self, layout: &GridLayout<D>, x: &[Vector<D>]) -> Result<(), OutOfGrid> {
-        self.drift = Real::INFINITY;
-        self.rebinned = true;
         let n = x.len();
         assert!(n < u32::MAX as usize, "particle indices are stored as u32");
         self.parallel = n >= PARALLEL_MIN;
         self.key.resize(n, 0);
-        self.order.resize(n, 0);
         let inv_h = 1.0 / layout.h;
         let block_dims = self.block_dims;
         let key_of = |(key, xp): (&mut u32, &Vector<D>)| *key = block_of(layout, &block_dims, xp, inv_h);
@@ -235,6 +232,68 @@ impl<const D: usize> Schedule<D> {
         } else {
             self.key.iter_mut().zip(x).for_each(key_of);
         }
+        self.sort_keys()
+    }
+
+    /// The block each particle was binned in, and how far (cells) the particles may have moved
+    /// since: with the positions, all a checkpoint needs to restore the schedule exactly.
+    pub fn binning(&self) -> (&[u32], Real) {
+        (&self.key, self.drift)
+    }
+
+    /// Restores a binning saved by [`Schedule::binning`] for particles now at `x`, so that the
+    /// steps that follow sum in the same order as they would have without the interruption.
+    /// Fails, changing nothing, unless every particle is within reach of its block.
+    pub fn restore(
+        &mut self,
+        layout: &GridLayout<D>,
+        x: &[Vector<D>],
+        bins: &[u32],
+        drift: Real,
+    ) -> Result<(), String> {
+        if bins.len() != x.len() {
+            return Err(format!("{} bins for {} particles", bins.len(), x.len()));
+        }
+        if drift.is_nan() || drift < 0.0 {
+            return Err(format!("drift must be non-negative, got {drift}"));
+        }
+        if drift.is_infinite() {
+            // Not binned (or binning forgotten): the next step bins afresh, the saved run did too.
+            self.invalidate();
+            return Ok(());
+        }
+        let inv_h = 1.0 / layout.h;
+        let slack = SLACK as i64;
+        for (p, (xp, &b)) in x.iter().zip(bins).enumerate() {
+            if b as usize >= self.num_blocks() {
+                return Err(format!("particle {p}: block {b} is not one of the grid's {} blocks", self.num_blocks()));
+            }
+            let c = self.block_coord(b as usize);
+            let within = (0..D).all(|k| {
+                let o = floor_i64(xp[k] * inv_h - 0.5).saturating_add(crate::grid::GHOST);
+                let lo = (c[k] * BLOCK) as i64 - slack;
+                xp[k].is_finite() && lo <= o && o <= lo + BLOCK as i64 - 1 + 2 * slack
+            });
+            if !within || !stencil_in_grid(layout, xp, inv_h) {
+                return Err(format!("particle {p} is not within reach of its block {b}"));
+            }
+        }
+        self.parallel = x.len() >= PARALLEL_MIN;
+        self.key.clear();
+        self.key.extend_from_slice(bins);
+        self.sort_keys().map_err(|OutOfGrid(p)| format!("particle {p} is outside the grid"))?;
+        self.drift = drift;
+        Ok(())
+    }
+
+    /// Counting sort of the particles by their keys, then the coloured block lists and the
+    /// active node blocks.
+    fn sort_keys(&mut self) -> Result<(), OutOfGrid> {
+        self.drift = Real::INFINITY;
+        self.rebinned = true;
+        let n = self.key.len();
+        self.order.resize(n, 0);
+        let block_dims = self.block_dims;
 
         // Counting sort in fixed chunks (CHUNKS, or one when serial): histogram, offsets
         // (block-major), scatter.

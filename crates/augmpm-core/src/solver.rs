@@ -63,22 +63,68 @@ where
     }
 }
 
-/// Why a step failed. The state is left as it was after the failing stage.
+/// A particle may move at most this many cell widths in one step. An explicit MPM step is stable
+/// only well below one cell per step (CFL); a particle jumping further means the state is blowing up.
+pub const MAX_CELLS_PER_STEP: Real = 1.0;
+
+/// Why a step failed, and the likely cause. The state is left as it was after the failing stage.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum StepError {
-    #[error("step {step}: particle {particle} left the grid (its stencil is outside the domain plus ghost layers)")]
-    LeftGrid { step: u64, particle: usize },
-    #[error("step {step}: particle {particle} became non-finite (NaN or infinity); the time step is likely too large for the material's stiffness or viscosity")]
-    NonFinite { step: u64, particle: usize },
+    #[error(
+        "step {step}: particle {particle} left the grid (its stencil is outside the domain plus ghost layers); {cause}"
+    )]
+    LeftGrid { step: u64, particle: usize, cause: String },
+    #[error("step {step}: particle {particle} became non-finite (NaN or infinity); {cause}")]
+    NonFinite { step: u64, particle: usize, cause: String },
+    #[error("step {step}: particle {particle} moved {cells:.3} cell widths in one step (at most {MAX_CELLS_PER_STEP} is allowed): the explicit step is unstable; {cause}")]
+    Unstable { step: u64, particle: usize, cells: Real, cause: String },
 }
 
 impl StepError {
     /// The step and the particle the error names.
     pub fn location(&self) -> (u64, usize) {
         match *self {
-            StepError::LeftGrid { step, particle } | StepError::NonFinite { step, particle } => (step, particle),
+            StepError::LeftGrid { step, particle, .. }
+            | StepError::NonFinite { step, particle, .. }
+            | StepError::Unstable { step, particle, .. } => (step, particle),
         }
     }
+}
+
+/// The likely cause of a failed step, from the time step against the materials' stable bound.
+fn likely_cause(dt: Real, stable_dt: Real) -> String {
+    if dt > stable_dt {
+        format!(
+            "likely cause: time.dt = {dt:e} s exceeds the materials' stable step {stable_dt:e} s (stiffness or \
+             viscosity too high for it); lower time.dt or give time.cfl"
+        )
+    } else {
+        format!(
+            "likely cause: the flow outran the grid (time.dt = {dt:e} s is within the materials' stable step \
+             {stable_dt:e} s, but a velocity v needs dt < h / v); lower time.dt"
+        )
+    }
+}
+
+/// Everything that evolves during a run: with the scene it was built from, a [`State`] continues
+/// the run bitwise identically (the binning is part of it: it fixes the order of the grid sums).
+#[derive(Clone, Debug, PartialEq)]
+pub struct State<const D: usize> {
+    pub step: u64,
+    /// Time (s).
+    pub time: Real,
+    pub ill_conditioned: u64,
+    pub low_mass_nodes: u64,
+    pub held_at_wall: u64,
+    /// Largest move of a particle in the last step (cell widths).
+    pub max_cfl: Real,
+    pub particles: Particles<D>,
+    /// Grid density of each particle in the last step (empty for models without fluids).
+    pub density: Vec<Real>,
+    /// Block each particle was binned in ([`Schedule::binning`]).
+    pub bins: Vec<u32>,
+    /// Cells the particles may have moved since they were binned (infinite: bin again).
+    pub drift: Real,
 }
 
 /// Scratch arrays of a step, allocated once (they grow only with the particle count or the
@@ -139,6 +185,8 @@ pub struct Metrics {
     pub low_mass_nodes: u64,
     /// Particle-steps so far in which a particle past a wall was kept from moving deeper (augmented grid).
     pub held_at_wall: u64,
+    /// Largest distance a particle moved in the last step, in cell widths (the step's CFL number).
+    pub max_cfl: Real,
 }
 
 /// A running simulation: the model, the particles and the clock.
@@ -156,6 +204,10 @@ pub struct Simulation<const D: usize> {
     scratch: Scratch<D>,
     /// The threads steps run on; `None` runs them in the caller's rayon context.
     pool: Option<rayon::ThreadPool>,
+    /// The error of the step that failed; later steps return it until a [`State`] is restored.
+    failed: Option<StepError>,
+    /// Largest distance a particle moved in the last step (cell widths).
+    last_move: Real,
 }
 
 impl<const D: usize> Simulation<D>
@@ -183,6 +235,8 @@ where
             times: StageTimes::default(),
             scratch,
             pool: None,
+            failed: None,
+            last_move: 0.0,
         }
     }
 
@@ -234,21 +288,118 @@ where
         self.advance(1)
     }
 
-    /// Takes `n` steps on the simulation's threads, stopping at the first failure.
+    /// Takes `n` steps on the simulation's threads, stopping at the first failure. After a failure
+    /// the state is that of the failing step, and every later call returns the same error.
     pub fn advance(&mut self, n: u64) -> Result<(), StepError> {
-        match self.pool.take() {
+        if let Some(e) = &self.failed {
+            return Err(e.clone());
+        }
+        let result = match self.pool.take() {
             Some(pool) => {
                 let result = pool.install(|| (0..n).try_for_each(|_| self.step_here()));
                 self.pool = Some(pool);
                 result
             }
             None => (0..n).try_for_each(|_| self.step_here()),
+        };
+        if let Err(e) = &result {
+            self.failed = Some(e.clone());
         }
+        result
+    }
+
+    /// The error of the step that failed, if one did.
+    pub fn failure(&self) -> Option<&StepError> {
+        self.failed.as_ref()
+    }
+
+    /// A copy of everything that evolves during the run (see [`State`]).
+    pub fn state(&self) -> State<D> {
+        let (bins, drift) = self.scratch.schedule.binning();
+        let n = self.particles.len();
+        // Before the first step (or after a failure) there is no binning to keep: the next step bins.
+        let (bins, drift) =
+            if bins.len() == n && drift.is_finite() { (bins.to_vec(), drift) } else { (vec![0; n], Real::INFINITY) };
+        State {
+            step: self.step,
+            time: self.time,
+            ill_conditioned: self.ill_conditioned,
+            low_mass_nodes: self.low_mass_nodes,
+            held_at_wall: self.held_at_wall,
+            max_cfl: self.last_move,
+            particles: self.particles.clone(),
+            density: self.scratch.density.clone(),
+            bins,
+            drift,
+        }
+    }
+
+    /// Continues from `state`, taken from a simulation of the same scene and method: the steps
+    /// that follow are bitwise identical to those the saved simulation would have taken. Fails,
+    /// changing nothing, if the state does not fit this model.
+    pub fn restore(&mut self, state: State<D>) -> Result<(), String> {
+        let p = &state.particles;
+        let n = p.x.len();
+        let lengths = [
+            ("v", p.v.len()),
+            ("c", p.c.len()),
+            ("f", p.f.len()),
+            ("jp", p.jp.len()),
+            ("mass", p.mass.len()),
+            ("vol0", p.vol0.len()),
+            ("body", p.body.len()),
+            ("material", p.material.len()),
+            ("bins", state.bins.len()),
+        ];
+        if let Some((name, len)) = lengths.iter().find(|(_, len)| *len != n) {
+            return Err(format!("{name} has {len} entries for {n} particles"));
+        }
+        if !(state.density.is_empty() || state.density.len() == n) {
+            return Err(format!("density has {} entries for {n} particles", state.density.len()));
+        }
+        if let Some(i) = p.material.iter().position(|&m| m as usize >= self.model.materials.len()) {
+            return Err(format!("particle {i}: material {} of {}", p.material[i], self.model.materials.len()));
+        }
+        let finite = |a: &[Real]| a.iter().all(|v| v.is_finite());
+        let vectors_finite = |a: &[Vector<D>]| a.iter().all(|v| v.iter().all(|x| x.is_finite()));
+        let matrices_finite = |a: &[crate::math::Matrix<D>]| a.iter().all(|m| m.iter().all(|x| x.is_finite()));
+        if !(vectors_finite(&p.x)
+            && vectors_finite(&p.v)
+            && matrices_finite(&p.c)
+            && matrices_finite(&p.f)
+            && finite(&p.jp)
+            && finite(&p.mass)
+            && finite(&p.vol0)
+            && finite(&state.density)
+            && state.time.is_finite()
+            && state.max_cfl.is_finite())
+        {
+            return Err("the state holds non-finite values".to_string());
+        }
+        let layout = &self.model.layout;
+        let run = |s: &mut Schedule<D>| s.restore(layout, &p.x, &state.bins, state.drift);
+        match &self.pool {
+            Some(pool) => pool.install(|| run(&mut self.scratch.schedule)),
+            None => run(&mut self.scratch.schedule),
+        }?;
+        let State {
+            step, time, ill_conditioned, low_mass_nodes, held_at_wall, max_cfl, particles, mut density, ..
+        } = state;
+        density.resize(n, 0.0);
+        (self.step, self.time) = (step, time);
+        (self.ill_conditioned, self.low_mass_nodes, self.held_at_wall) =
+            (ill_conditioned, low_mass_nodes, held_at_wall);
+        self.last_move = max_cfl;
+        self.particles = particles;
+        self.scratch.density = density;
+        self.failed = None;
+        Ok(())
     }
 
     fn step_here(&mut self) -> Result<(), StepError> {
         let step = self.step + 1;
-        let left = |OutOfGrid(particle)| StepError::LeftGrid { step, particle };
+        let cause = likely_cause(self.model.dt, self.model.stable_dt());
+        let left = |OutOfGrid(particle)| StepError::LeftGrid { step, particle, cause: cause.clone() };
         let Self { model, particles, scratch, times, .. } = self;
         let layout = &model.layout;
         let dt = model.dt;
@@ -310,19 +461,28 @@ where
         lap(&mut times.grid);
 
         let outcome = transfer::g2p(&t, model.region.as_ref(), &model.materials, &grid.momentum, particles, dt);
-        schedule.moved(outcome.max_move / layout.h);
+        let cells = outcome.max_move / layout.h;
+        schedule.moved(cells);
         lap(&mut times.g2p);
         self.held_at_wall += outcome.held_at_wall as u64;
         self.step = step;
         self.time += dt;
-        if outcome.non_finite.is_some() || outcome.left_grid.is_some() {
-            // A later call must not trust the binning of a state that went bad.
-            schedule.invalidate();
-        }
-        match (outcome.non_finite, outcome.left_grid) {
-            (Some(particle), _) => Err(StepError::NonFinite { step, particle }),
-            (None, Some(particle)) => Err(StepError::LeftGrid { step, particle }),
-            (None, None) => Ok(()),
+        self.last_move = cells;
+        let error = match (outcome.non_finite, outcome.left_grid) {
+            (Some(particle), _) => Some(StepError::NonFinite { step, particle, cause }),
+            (None, Some(particle)) => Some(StepError::LeftGrid { step, particle, cause }),
+            (None, None) if cells > MAX_CELLS_PER_STEP => {
+                Some(StepError::Unstable { step, particle: outcome.fastest, cells, cause })
+            }
+            (None, None) => None,
+        };
+        match error {
+            Some(e) => {
+                // A later call must not trust the binning of a state that went bad.
+                self.scratch.schedule.invalidate();
+                Err(e)
+            }
+            None => Ok(()),
         }
     }
 
@@ -352,6 +512,7 @@ where
             ill_conditioned: self.ill_conditioned,
             low_mass_nodes: self.low_mass_nodes,
             held_at_wall: self.held_at_wall,
+            max_cfl: self.last_move,
         }
     }
 }

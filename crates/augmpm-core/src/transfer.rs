@@ -285,13 +285,15 @@ pub fn grid_velocity<const D: usize>(
 }
 
 /// What G2P found: particles held at walls, the first particle that went non-finite and the
-/// first whose stencil left the grid, and the largest distance a particle moved along an axis (m).
+/// first whose stencil left the grid, and the largest distance a particle moved along an axis (m)
+/// with the particle that moved it (the lowest index among equals).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct G2pOutcome {
     pub held_at_wall: usize,
     pub non_finite: Option<usize>,
     pub left_grid: Option<usize>,
     pub max_move: Real,
+    pub fastest: usize,
 }
 
 /// Per-particle results of G2P, reduced in any order to the same [`G2pOutcome`].
@@ -301,17 +303,26 @@ struct G2pSum {
     non_finite: usize,
     left_grid: usize,
     max_move: Real,
+    fastest: usize,
 }
 
 impl G2pSum {
-    const NONE: Self = Self { held: 0, non_finite: usize::MAX, left_grid: usize::MAX, max_move: 0.0 };
+    const NONE: Self = Self { held: 0, non_finite: usize::MAX, left_grid: usize::MAX, max_move: 0.0, fastest: 0 };
 
     fn join(self, o: Self) -> Self {
+        // The larger move, the lower index among equal ones: the same result in any order.
+        let (max_move, fastest) =
+            if o.max_move > self.max_move || (o.max_move == self.max_move && o.fastest < self.fastest) {
+                (o.max_move, o.fastest)
+            } else {
+                (self.max_move, self.fastest)
+            };
         Self {
             held: self.held + o.held,
             non_finite: self.non_finite.min(o.non_finite),
             left_grid: self.left_grid.min(o.left_grid),
-            max_move: self.max_move.max(o.max_move),
+            max_move,
+            fastest,
         }
     }
 }
@@ -379,6 +390,7 @@ where
                 left_grid: if stencil_in_grid(layout, xp, inv_h) { usize::MAX } else { p },
                 // The distance actually moved (rounding can move x by more than |v dt| in f32).
                 max_move: (*xp - before).amax(),
+                fastest: p,
             }
         })
         .reduce(|| G2pSum::NONE, G2pSum::join);
@@ -388,6 +400,7 @@ where
         non_finite: first(sum.non_finite),
         left_grid: first(sum.left_grid),
         max_move: sum.max_move,
+        fastest: sum.fastest,
     }
 }
 

@@ -9,10 +9,9 @@ use augmpm_core::solver::Boundary;
 use augmpm_core::Scene;
 use nalgebra::Vector2;
 use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-use crate::errors::scene_error;
+use crate::errors::{guard, scene_error};
 use crate::{parse_method, rows, vectors_to_array};
 
 /// Reconstructed values (M,) and gradients (M, 2).
@@ -30,10 +29,12 @@ pub struct PyGrid {
 impl PyGrid {
     #[new]
     fn new(scene_json: &str, method: &str) -> PyResult<Self> {
-        let method = parse_method(method)?;
-        let scene = Scene::from_json(scene_json).map_err(|e| scene_error(&e.key, &e.reason))?;
-        let (layout, region, boundary) = scene.build_walls(method).map_err(|e| scene_error(&e.key, &e.reason))?;
-        Ok(Self { layout, region, boundary })
+        guard(|| {
+            let method = parse_method(method)?;
+            let scene = Scene::from_json(scene_json).map_err(|e| scene_error(&e.key, &e.reason))?;
+            let (layout, region, boundary) = scene.build_walls(method).map_err(|e| scene_error(&e.key, &e.reason))?;
+            Ok(Self { layout, region, boundary })
+        })
     }
 
     /// Positions (m) of the regular nodes, ghosts included, shape (N, 2).
@@ -69,7 +70,7 @@ impl PyGrid {
         points: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let pts = rows(&points)?;
-        Ok(PyArray1::from_vec(py, pts.iter().map(|x| self.region.distance(x).distance).collect()))
+        guard(|| Ok(PyArray1::from_vec(py, pts.iter().map(|x| self.region.distance(x).distance).collect())))
     }
 
     /// MLS reconstruction at `query` (M, 2) of a field given at the grid points: `values`
@@ -81,16 +82,27 @@ impl PyGrid {
         values: PyReadonlyArray1<'py, f64>,
         query: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<ValuesAndGradients<'py>> {
-        let values = values.as_slice()?;
+        guard(|| self.interpolate_guarded(py, values, query))
+    }
+}
+
+impl PyGrid {
+    fn interpolate_guarded<'py>(
+        &self,
+        py: Python<'py>,
+        values: PyReadonlyArray1<'py, f64>,
+        query: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<ValuesAndGradients<'py>> {
+        let values = values.as_slice().map_err(|_| scene_error("values", "must be a contiguous float64 array"))?;
         let expected = match &self.boundary {
             Boundary::Augmented(g) => self.layout.num_nodes() + g.points.len(),
             Boundary::Naive(_) => self.layout.num_nodes(),
         };
         if values.len() != expected {
-            return Err(PyValueError::new_err(format!(
-                "values must hold one entry per node and boundary point ({expected}), got {}",
-                values.len()
-            )));
+            return Err(scene_error(
+                "values",
+                &format!("must hold one entry per node and boundary point ({expected}), got {}", values.len()),
+            ));
         }
         let pts = rows(&query)?;
         let h = self.layout.h;

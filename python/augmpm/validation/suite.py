@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from augmpm.files import save_png, write_text
 from augmpm.validation import channel, dam_break, hydrostatic, incline, interpolation
 from augmpm.validation.records import Record
 
@@ -59,8 +60,7 @@ def _plot_channels(results: dict, out: Path, angles: list[float]) -> list[str]:
         axes[0][0].legend(fontsize=8)
         fig.tight_layout()
         name = f"{kind}.png"
-        fig.savefig(out / name, dpi=80)
-        plt.close(fig)
+        save_png(fig, out / name)
         names.append(name)
     return names
 
@@ -71,8 +71,7 @@ def _plot_simple(out: Path, name: str, draw: Callable) -> str:
     draw(ax)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(out / name, dpi=80)
-    plt.close(fig)
+    save_png(fig, out / name)
     return name
 
 
@@ -156,8 +155,8 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
 
     plots.append(("Interpolation", _plot_simple(out, "interpolation.png", draw_itp)))
 
-    (out / "results.json").write_text(json.dumps([r.to_json() for r in records], indent=1), encoding="utf-8")
-    (out / "report.md").write_text(report(records, plots, quick), encoding="utf-8")
+    write_text(out / "results.json", json.dumps([r.to_json() for r in records], indent=1))
+    write_text(out / "report.md", report(records, plots, quick))
     return records
 
 
