@@ -103,3 +103,19 @@ fn a_particle_outrunning_the_grid_is_stopped() {
         other => panic!("expected an unstable step, got {other}"),
     }
 }
+
+/// The memory estimate counts the particles a scene will seed from the bodies' areas (jittered
+/// seeding: within a few percent) and refuses, naming the body, a limit below it.
+#[test]
+fn memory_estimate_predicts_the_seeding() {
+    let scene = Scene::from_json(DROP).unwrap();
+    let estimate = scene.memory_estimate().unwrap();
+    let seeded = scene.build(Method::Naive).unwrap().0.particles.len() as f64;
+    // π 0.2² m² / (1/64 m)² = 491 particles expected; the jittered grid seeds within a few of it.
+    assert!((estimate.particles as f64 / seeded - 1.0).abs() < 0.03, "{} vs {seeded}", estimate.particles);
+    assert_eq!(estimate.nodes, 37 * 37);
+    estimate.check(estimate.bytes).unwrap();
+    let err = estimate.check(estimate.bytes - 1).unwrap_err();
+    assert_eq!(err.key, "bodies[0].seeding");
+    assert!(err.reason.contains(&format!("{} particles, 1369 grid nodes", estimate.particles)), "{}", err.reason);
+}
