@@ -304,3 +304,20 @@ def test_fluid_at_rest_stays_put_for_a_long_run(method):
         assert m["kinetic_energy"] < bound, m
         assert m["max_penetration"] < depth, m
     assert sim.steps_done == LONG_STEPS
+
+
+def test_resume_refuses_settings_of_a_new_run(tmp_path):
+    """--resume continues a run as it was started: a scene, --steps or --method beside it is bad input (exit 2)."""
+    for args in (
+        ["run", "--resume", str(tmp_path), str(_drop(tmp_path))],
+        ["run", "--resume", str(tmp_path), "--steps", "5"],
+    ):
+        p = _cli(*args)
+        _, stderr = p.communicate(timeout=60)
+        assert p.returncode == 2 and "--resume: continues the run as it was started" in stderr, stderr
+    p = _cli("run", "--resume", str(tmp_path / "none"))
+    _, stderr = p.communicate(timeout=60)
+    assert p.returncode == 2 and "no checkpoint" in stderr and "Traceback" not in stderr, stderr
+    p = _cli("run")
+    _, stderr = p.communicate(timeout=60)
+    assert p.returncode == 2 and "give a scene file, or --resume DIR" in stderr, stderr
