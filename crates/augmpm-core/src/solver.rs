@@ -93,7 +93,7 @@ impl StepError {
 
 /// The likely cause of a failed step, from the time step against the materials' stable bound.
 fn likely_cause(dt: Real, stable_dt: Real) -> String {
-    if dt > stable_dt {
+    let cause = if dt > stable_dt {
         format!(
             "likely cause: time.dt = {dt:e} s exceeds the materials' stable step {stable_dt:e} s (stiffness or \
              viscosity too high for it); lower time.dt or give time.cfl"
@@ -103,6 +103,11 @@ fn likely_cause(dt: Real, stable_dt: Real) -> String {
             "likely cause: the flow outran the grid (time.dt = {dt:e} s is within the materials' stable step \
              {stable_dt:e} s, but a velocity v needs dt < h / v); lower time.dt"
         )
+    };
+    if crate::scene::Precision::NATIVE == crate::scene::Precision::F32 {
+        cause + "; or the f32 rounding near walls: precision = \"f64\" is the robust choice"
+    } else {
+        cause
     }
 }
 

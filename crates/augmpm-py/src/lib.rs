@@ -135,8 +135,8 @@ impl PySimulation {
                 let (sim, mut warnings) = scene.build(method).map_err(bad32)?;
                 if method == augmpm_core_f32::Method::Augmented {
                     warnings.push(
-                        "precision f32 with the augmented method is not yet robust: in the benchmark dam break a \
-                         particle leaves the grid after ~250 steps (f64 runs it through); prefer f64"
+                        "precision f32 with the augmented method is not yet robust: the benchmark dam break stops \
+                         unstable after 220-300 steps (f64 runs it through); prefer f64"
                             .to_string(),
                     );
                 }
