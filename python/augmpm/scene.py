@@ -8,18 +8,35 @@ inside the walls) is checked by the Rust core when the simulation is built.
 from __future__ import annotations
 
 import json
+import math
 import tomllib
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import tomli_w
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
+from pydantic_core import PydanticCustomError
 
 from augmpm._core import SceneError
 
+
+def _typed(expected: str) -> BeforeValidator:
+    """Refuses a string or a boolean where a number belongs: TOML is typed, so "1.5" or true there is a
+    mistake to report, not a value to convert (pydantic's lax mode would read them as 1.5 and 1)."""
+
+    def check(value: Any) -> Any:
+        if isinstance(value, str | bool):
+            kind = "a boolean" if isinstance(value, bool) else "a string"
+            raise PydanticCustomError("type", f"Input should be a valid {expected}, not {kind}")
+        return value
+
+    return BeforeValidator(check)
+
+
+_NUMBER, _INTEGER = _typed("number"), _typed("integer")
 Vec2 = tuple[float, float]
-PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+PositiveFloat = Annotated[float, _NUMBER, Field(gt=0, allow_inf_nan=False)]
+FiniteFloat = Annotated[float, _NUMBER, Field(allow_inf_nan=False)]
 FiniteVec2 = tuple[FiniteFloat, FiniteFloat]
 WallCondition = Literal["sticky", "slip", "separate"]
 
@@ -32,9 +49,9 @@ class Grid(_Strict):
     """Domain box [0, Lx] × [0, Ly] (m) and cells along x (h = Lx / resolution)."""
 
     domain: tuple[PositiveFloat, PositiveFloat]
-    resolution: Annotated[int, Field(ge=2, le=65536)]
+    resolution: Annotated[int, _INTEGER, Field(ge=2, le=65536)]
     #: Correct the fluid density gathered next to walls for the part of the kernel in the wall.
-    density_wall_correction: bool = False
+    density_wall_correction: Annotated[bool, Field(strict=True)] = False
 
     @property
     def cell_size(self) -> float:
@@ -42,7 +59,10 @@ class Grid(_Strict):
 
     @model_validator(mode="after")
     def _whole_cells(self) -> Grid:
-        ny = self.domain[1] / self.cell_size
+        h = self.cell_size
+        ny = self.domain[1] / h if h > 0 else math.inf  # h underflows to 0 for a subnormal width
+        if not math.isfinite(ny):
+            raise ValueError(f"domain height {self.domain[1]} is not a finite number of cells of width {h}")
         if abs(ny - round(ny)) > 1e-9 * max(ny, 1.0) or round(ny) < 2:
             raise ValueError(
                 f"domain height {self.domain[1]} is not a whole number (>= 2) of cells of width {self.cell_size}"
@@ -54,9 +74,10 @@ class Time(_Strict):
     """Time step (s) or CFL number, number of steps, steps between output frames."""
 
     dt: PositiveFloat | None = None
-    cfl: Annotated[float, Field(gt=0, le=1)] | None = None
-    steps: Annotated[int, Field(ge=0)]
-    output_interval: Annotated[int, Field(ge=1)]
+    cfl: Annotated[float, _NUMBER, Field(gt=0, le=1)] | None = None
+    # The engine counts steps in an unsigned 64-bit integer.
+    steps: Annotated[int, _INTEGER, Field(ge=0, lt=2**64)]
+    output_interval: Annotated[int, _INTEGER, Field(ge=1, lt=2**64)]
 
     @model_validator(mode="after")
     def _dt_or_cfl(self) -> Time:
@@ -99,14 +120,14 @@ class Fluid(_Strict):
     density: PositiveFloat
     stiffness: PositiveFloat
     gamma: PositiveFloat = 7.0
-    viscosity: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
-    min_pressure: Annotated[float, Field(le=0, allow_inf_nan=False)] = 0.0
+    viscosity: Annotated[float, _NUMBER, Field(ge=0, allow_inf_nan=False)] = 0.0
+    min_pressure: Annotated[float, _NUMBER, Field(le=0, allow_inf_nan=False)] = 0.0
 
 
 class _Solid(_Strict):
     density: PositiveFloat
     youngs_modulus: PositiveFloat
-    poisson_ratio: Annotated[float, Field(gt=-1.0, lt=0.5)]
+    poisson_ratio: Annotated[float, _NUMBER, Field(gt=-1.0, lt=0.5)]
 
 
 class Elastic(_Solid):
@@ -125,9 +146,9 @@ class Snow(_Solid):
     """Stomakhin et al. 2013 snow: fixed-corotated with clamped singular values and hardening."""
 
     type: Literal["snow"]
-    critical_compression: Annotated[float, Field(gt=0, lt=1)] = 2.5e-2
+    critical_compression: Annotated[float, _NUMBER, Field(gt=0, lt=1)] = 2.5e-2
     critical_stretch: PositiveFloat = 7.5e-3
-    hardening: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 10.0
+    hardening: Annotated[float, _NUMBER, Field(ge=0, allow_inf_nan=False)] = 10.0
     jp_min: PositiveFloat = 0.6
     jp_max: PositiveFloat = 20.0
 
@@ -139,7 +160,7 @@ class Seeding(_Strict):
     """Jittered grid: one random point per square of side ``spacing`` (m), or ``per_cell`` per grid cell."""
 
     spacing: PositiveFloat | None = None
-    per_cell: Annotated[int, Field(ge=1, le=1024)] | None = None
+    per_cell: Annotated[int, _INTEGER, Field(ge=1, le=1024)] | None = None
 
     @model_validator(mode="after")
     def _one_of(self) -> Seeding:
@@ -187,15 +208,15 @@ Body = Annotated[PolygonBody | BoxBody | CircleBody, Field(discriminator="shape"
 class Augmented(_Strict):
     """Augmented grid: exclusion distance δ (Fig. 3) and largest boundary-point spacing, in cell widths."""
 
-    delta: Annotated[float, Field(ge=0, lt=1.5)] = 0.25
-    spacing: Annotated[float, Field(gt=0.05, le=1.0)] = 1.0
+    delta: Annotated[float, _NUMBER, Field(ge=0, lt=1.5)] = 0.25
+    spacing: Annotated[float, _NUMBER, Field(gt=0.05, le=1.0)] = 1.0
 
 
 class Scene(_Strict):
     """A whole scene. Build one in code with keyword arguments or :meth:`from_dict`."""
 
     name: str = ""
-    seed: Annotated[int, Field(ge=0, lt=2**64)] = 0
+    seed: Annotated[int, _INTEGER, Field(ge=0, lt=2**64)] = 0
     gravity: FiniteVec2 = (0.0, -9.81)
     grid: Grid
     time: Time
@@ -245,10 +266,14 @@ def _format_loc(loc: tuple[Any, ...]) -> str:
 
 def _scene_error(e: ValidationError) -> SceneError:
     first = e.errors()[0]
-    key = _format_loc(tuple(first["loc"]))
+    loc = tuple(first["loc"])
+    key = _format_loc(loc)
     reason = first["msg"]
     if first["type"] == "extra_forbidden":
         reason = "unknown key"
+    elif first["type"] == "missing" and loc and isinstance(loc[-1], int):
+        # A short vector, e.g. gravity = [1.0]: name the vector, not an item the file does not have.
+        key, reason = _format_loc(loc[:-1]), f"too few items (item {loc[-1]} is missing)"
     elif first["type"] == "missing":
         reason = "required key is missing"
     more = len(e.errors()) - 1

@@ -61,13 +61,22 @@ impl<const D: usize> Particles<D> {
             + b(&self.material)
     }
 
-    /// Total kinetic energy ½ Σ m v² (J, or J/m in 2D), summed in particle order.
-    pub fn kinetic_energy(&self) -> Real {
-        0.5 * self.mass.iter().zip(&self.v).map(|(m, v)| m * v.norm_squared()).sum::<Real>()
+    /// Total kinetic energy ½ Σ m v² (J, or J/m in 2D), summed in particle order in f64 as
+    /// ½ Σ (√m |v|)², which overflows only when the energy itself is beyond the f64 range.
+    pub fn kinetic_energy(&self) -> f64 {
+        0.5 * self.mass.iter().zip(&self.v).map(|(&m, v)| energy_root(m, v).powi(2)).sum::<f64>()
     }
 
     /// Total momentum Σ m v.
     pub fn momentum(&self) -> Vector<D> {
         self.mass.iter().zip(&self.v).fold(Vector::<D>::zeros(), |acc, (m, v)| acc + v * *m)
     }
+}
+
+/// √(m) |v| in f64: its square is twice a particle's kinetic energy, finite exactly when that
+/// energy is within the f64 range (m |v|² itself can overflow first).
+#[inline]
+#[allow(clippy::useless_conversion)] // `Real` is f64 here, f32 in augmpm-core-f32
+pub fn energy_root<const D: usize>(m: Real, v: &Vector<D>) -> f64 {
+    f64::from(m).sqrt() * v.iter().map(|&a| f64::from(a).powi(2)).sum::<f64>().sqrt()
 }

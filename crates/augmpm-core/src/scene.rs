@@ -551,6 +551,15 @@ impl Scene {
             materials.push(body.material.clone());
             let first = particles.len();
             seed_body(&key, body, b, self.seed, h, &mut particles)?;
+            let energy: f64 = (first..particles.len())
+                .map(|p| crate::particles::energy_root(particles.mass[p], &particles.v[p]).powi(2))
+                .sum();
+            if !energy.is_finite() {
+                return Err(SceneError::new(
+                    format!("{key}.velocity"),
+                    "the body's kinetic energy is beyond the floating-point range (velocity or density too large)",
+                ));
+            }
             let outside = (first..particles.len()).filter(|&p| region.distance(&particles.x[p]).distance > 0.0).count();
             if outside > 0 {
                 return Err(SceneError::new(

@@ -74,7 +74,7 @@ pub enum StepError {
         "step {step}: particle {particle} left the grid (its stencil is outside the domain plus ghost layers); {cause}"
     )]
     LeftGrid { step: u64, particle: usize, cause: String },
-    #[error("step {step}: particle {particle} became non-finite (NaN or infinity); {cause}")]
+    #[error("step {step}: particle {particle} became non-finite (NaN or infinity, or a kinetic energy beyond the floating-point range); {cause}")]
     NonFinite { step: u64, particle: usize, cause: String },
     #[error("step {step}: particle {particle} moved {cells:.3} cell widths in one step (at most {MAX_CELLS_PER_STEP} is allowed): the explicit step is unstable; {cause}")]
     Unstable { step: u64, particle: usize, cells: Real, cause: String },
@@ -178,8 +178,8 @@ pub struct Metrics {
     pub step: u64,
     /// Time (s).
     pub time: Real,
-    /// ½ Σ m v² (J, or J/m in 2D).
-    pub kinetic_energy: Real,
+    /// ½ Σ m v² (J, or J/m in 2D), in f64 whatever the precision.
+    pub kinetic_energy: f64,
     /// Particles on the wall side of the material region.
     pub n_outside: usize,
     /// Deepest particle beyond a wall, in cell widths h (0 when none is outside).

@@ -344,7 +344,7 @@ where
     let layout = t.layout;
     let (h, inv_h) = (layout.h, 1.0 / layout.h);
     let apic = 4.0 * inv_h * inv_h;
-    let Particles { x, v, c, f, jp, material, .. } = particles;
+    let Particles { x, v, c, f, jp, material, mass, .. } = particles;
     let sum = x
         .par_iter_mut()
         .zip(v.par_iter_mut())
@@ -352,9 +352,10 @@ where
         .zip(f.par_iter_mut())
         .zip(jp.par_iter_mut())
         .zip(material.par_iter())
+        .zip(mass.par_iter())
         .enumerate()
         .with_min_len(t.schedule.min_len(MIN_TASK))
-        .map(|(p, (((((xp, vp), cp), fp), jpp), m))| {
+        .map(|(p, ((((((xp, vp), cp), fp), jpp), m), &mp))| {
             let mut vn = Vector::<D>::zeros();
             let mut cn = Matrix::<D>::zeros();
             let mut held = false;
@@ -383,7 +384,9 @@ where
             let before = *xp;
             *xp += vn * dt;
             materials[*m as usize].update_deformation(fp, jpp, cp, dt);
-            let finite = xp.iter().chain(vp.iter()).chain(fp.iter()).all(|a| a.is_finite());
+            // The particle's kinetic energy must be representable too, or the run's energy is garbage.
+            let finite = xp.iter().chain(vp.iter()).chain(fp.iter()).all(|a| a.is_finite())
+                && crate::particles::energy_root(mp, vp) < f64::MAX.sqrt();
             G2pSum {
                 held: usize::from(held),
                 non_finite: if finite { usize::MAX } else { p },
