@@ -108,7 +108,7 @@ def _run(args: argparse.Namespace) -> int:
                 ("--gif", args.gif),
                 ("--no-render", args.no_render),
             ]
-            if value
+            if value not in (None, False, [])
         ]
         if given:
             raise _core.SceneError(

@@ -5,8 +5,9 @@ in the same directory, and the file is renamed over its final name (``os.replace
 atomic on POSIX and Windows). A run killed at any moment (even SIGKILL) leaves each file
 either as it was before or complete, plus at most a stray temporary ``.<name>.tmp-<pid>``
 file that the next run removes. Only ``durable`` writes (checkpoints) are also forced to
-the disk before the rename, which guards them against a power cut as well; the other
-files cost no disk flush each.
+the disk before the rename (the directory entry is not), so a checkpoint's own bytes
+survive a power cut; the other files cost no disk flush each and are safe only against
+the process dying.
 """
 
 from __future__ import annotations

@@ -249,15 +249,18 @@ class FrameRenderer:
         region[...] = (region * (255 - alpha) // 255).astype(np.uint8)
         return r0, r0 + region.shape[0]
 
-    def draw(self, x: np.ndarray, body: np.ndarray, time: float, path: Path) -> None:
+    def draw(self, x: np.ndarray, body: np.ndarray, time: float, path: Path) -> Future:
         """Draws particles ``x`` (N, 2) in m at ``time`` (s) into the PNG at ``path`` and the animation.
 
-        Returns once the frame is queued; the arrays are copied, so the caller may reuse them.
+        Returns once the frame is queued, with the future of its writing; the arrays are copied,
+        so the caller may reuse them.
         """
         frame = (np.array(x, dtype=float), np.array(body), float(time), Path(path))
-        self._pending.append(self._pool.submit(self._write, *frame))
+        future = self._pool.submit(self._write, *frame)
+        self._pending.append(future)
         while len(self._pending) > _MAX_PENDING:
             self._pending.popleft().result()
+        return future
 
     def _write(self, x: np.ndarray, body: np.ndarray, time: float, path: Path) -> None:
         img, changed = self._compose(x, body, time)

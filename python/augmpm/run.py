@@ -7,12 +7,12 @@ per output frame), ``particles/frame_00000.npz`` (``x``, ``v``, ``body``),
 checkpoint, from which :func:`resume_run` continues).
 
 Every file is written atomically (see :mod:`augmpm.files`). A frame's files are
-written first, then ``metrics.csv`` with the frame's row: a row in ``metrics.csv``
-means its frame is complete. A run killed at any moment leaves complete frames,
-rows for all of them but possibly the last, and a checkpoint; :func:`resume_run`
-removes what followed the checkpoint and continues, writing the same bytes the
-uninterrupted run would have written (the animation aside: it is encoded again
-from the PNG frames).
+written first (its PNG by the renderer's background thread), then ``metrics.csv``
+with the frame's row: a row in ``metrics.csv`` means its frame is complete. A run
+killed at any moment leaves complete frames, rows for all of them but the few
+still being written, and a checkpoint; :func:`resume_run` removes what followed
+the checkpoint and continues, writing the same bytes the uninterrupted run would
+have written (the animation aside: it is encoded again from the PNG frames).
 """
 
 from __future__ import annotations
@@ -24,6 +24,8 @@ import json
 import re
 import sys
 import time as wallclock
+from collections import deque
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -87,7 +89,9 @@ def run_scene(
     total = scene.time.steps if steps is None else steps
     out.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(out)
-    (out / CHECKPOINT).unlink(missing_ok=True)
+    # The index files of an earlier run first, so that no row ever names a removed frame.
+    for name in (CHECKPOINT, "metrics.csv", "particles.pvd"):
+        (out / name).unlink(missing_ok=True)
     _remove_frames_after(out, -1)
     header = (
         f"# resolved scene; method = {method}, dt = {sim.dt!r} s, cell size h = {sim.cell_size!r} m, "
@@ -126,20 +130,23 @@ def resume_run(
         raise _plain_error("--resume", f"the checkpoint's scene is not valid: {e}") from None
     sim = Simulation(scene, meta["method"], threads=threads)
     sim.restore(state)
-    frame = int(meta["frame"])
+    frame = meta["frame"]
     rows = _read_metrics(out / "metrics.csv")
     if len(rows) <= frame:
         raise _plain_error("--resume", f"metrics.csv in {out} has {len(rows)} rows; the checkpoint is at frame {frame}")
     rows = rows[: frame + 1]
-    if int(rows[-1]["step"]) != sim.steps_done:
+    if rows[-1].get("step") != str(sim.steps_done):
         raise _plain_error(
-            "--resume", f"metrics.csv row {frame} is step {rows[-1]['step']}; the checkpoint is at {sim.steps_done}"
+            "--resume", f"metrics.csv row {frame} is step {rows[-1].get('step')}; the checkpoint is at {sim.steps_done}"
         )
     remove_stale_temporaries(out)
+    run = _Run(sim, out, meta, every, progress, rows=rows, done=meta["done"], frame=frame, resumed=True)
+    # The index files first, then the frames after the checkpoint: no row ever names a removed frame.
+    run.commit(rewrite=True)
+    write_pvd(out / "particles.pvd", run.vtk_frames)
     _remove_frames_after(out, frame)
     for partial in out.glob("*.partial.*"):
         partial.unlink()
-    run = _Run(sim, out, meta, every, progress, rows=rows, done=int(meta["done"]), frame=frame, resumed=True)
     return run.go()
 
 
@@ -162,6 +169,8 @@ class _Run:
         self.meta["checkpoint_every"] = checkpoint_every
         self.every, self.progress = checkpoint_every, progress
         self.rows, self.done, self.frame, self.resumed = rows, done, frame, resumed
+        # Rows of frames whose PNG is still being written, with its future: committed once it is.
+        self.pending: deque[tuple[dict, Future | None]] = deque()
         self.total = int(meta["total_steps"])
         self.vtk_frames = [(float(r["time"]), f"vtk/frame_{i:05d}.vtp") for i, r in enumerate(rows)]
         for sub in ("particles", "frames", "vtk"):
@@ -198,8 +207,10 @@ class _Run:
                 self.output()
                 bar.update(n)
         bar.close()
+        self.commit(wait=True)
         if renderer is not None and animation and self.resumed:
-            write_animation(sorted((out / "frames").glob("frame_*.png")), out / f"animation.{animation}")
+            frames = sorted((out / "frames").glob("frame_*.png"), key=lambda f: int(_FRAME.match(f.name).group(1)))
+            write_animation(frames, out / f"animation.{animation}")
         return RunResult(
             out=out,
             frames=len(self.rows),
@@ -220,20 +231,34 @@ class _Run:
         write_vtp(out / "vtk" / f"{name}.vtp", x, {"velocity": v, "body": body})
         self.vtk_frames.append((sim.time, f"vtk/{name}.vtp"))
         write_pvd(out / "particles.pvd", self.vtk_frames)
+        png = None
         if self.renderer is not None:
-            self.renderer.draw(x, body, sim.time, out / "frames" / f"{name}.png")
+            png = self.renderer.draw(x, body, sim.time, out / "frames" / f"{name}.png")
         m = sim.metrics()
-        self.rows.append({k: m[k] for k in METRIC_COLUMNS})
-        buf = io.StringIO()
-        writer = csv.DictWriter(buf, fieldnames=METRIC_COLUMNS, lineterminator="\r\n")
-        writer.writeheader()
-        writer.writerows(self.rows)
-        write_text(out / "metrics.csv", buf.getvalue())
-        if self.every and self.frame % self.every == 0:
-            if self.renderer is not None:
-                self.renderer.flush()  # the checkpoint must not be ahead of the PNGs it implies
+        self.pending.append(({k: m[k] for k in METRIC_COLUMNS}, png))
+        checkpoint = self.every and self.frame % self.every == 0
+        # A checkpoint must not be ahead of the rows (and PNGs) it implies.
+        self.commit(wait=bool(checkpoint))
+        if checkpoint:
             meta = {**self.meta, "frame": self.frame, "done": self.done}
             save_checkpoint(out / CHECKPOINT, sim, meta)
+
+    def commit(self, wait: bool = False, rewrite: bool = False) -> None:
+        """Writes ``metrics.csv`` with the rows of every frame whose files are all written (waiting
+        for the PNGs being drawn if ``wait``); ``rewrite`` writes it even if no row is new."""
+        committed = False
+        while self.pending and (wait or self.pending[0][1] is None or self.pending[0][1].done()):
+            row, png = self.pending.popleft()
+            if png is not None:
+                png.result()
+            self.rows.append(row)
+            committed = True
+        if committed or rewrite or not (self.out / "metrics.csv").exists():
+            buf = io.StringIO()
+            writer = csv.DictWriter(buf, fieldnames=METRIC_COLUMNS, lineterminator="\r\n")
+            writer.writeheader()
+            writer.writerows(self.rows)
+            write_text(self.out / "metrics.csv", buf.getvalue())
 
 
 def save_checkpoint(path: Path, sim: Simulation, meta: dict) -> None:
@@ -256,9 +281,18 @@ def load_checkpoint(path: Path) -> tuple[dict, dict[str, np.ndarray]]:
         meta = json.loads(str(arrays.pop("meta")))
     except (OSError, ValueError, KeyError) as e:
         raise _plain_error("--resume", f"{path} is not a readable checkpoint: {e}") from None
-    missing = {"format", "scene", "method", "total_steps", "render", "animation", "frame", "done"} - set(meta)
-    if missing or meta["format"] != _CHECKPOINT_FORMAT:
-        raise _plain_error("--resume", f"{path} is not a checkpoint of this version (missing {sorted(missing)})")
+    except Exception as e:  # a truncated or foreign file: EOFError, zipfile.BadZipFile, ...
+        raise _plain_error("--resume", f"{path} is not a readable checkpoint ({type(e).__name__}: {e})") from None
+    types = {"format": int, "scene": str, "method": str, "total_steps": int, "frame": int, "done": int}
+    types |= {"render": bool, "augmpm": str}
+    if not isinstance(meta, dict) or any(not isinstance(meta.get(k), t) for k, t in types.items()):
+        raise _plain_error("--resume", f"{path} is not a checkpoint augmpm wrote (its metadata is incomplete)")
+    if meta["format"] != _CHECKPOINT_FORMAT or meta["augmpm"] != _core.__version__:
+        raise _plain_error(
+            "--resume",
+            f"{path} was written by augmpm {meta['augmpm']}; this is {_core.__version__}, whose results may "
+            "differ in the last bits: run the scene again",
+        )
     return meta, arrays
 
 
@@ -271,7 +305,7 @@ def _read_metrics(path: Path) -> list[dict[str, str]]:
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             return list(csv.DictReader(fh))
-    except OSError as e:
+    except (OSError, UnicodeDecodeError, csv.Error) as e:
         raise _plain_error("--resume", f"cannot read {path}: {e}") from None
 
 

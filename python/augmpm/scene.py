@@ -75,9 +75,9 @@ class Time(_Strict):
 
     dt: PositiveFloat | None = None
     cfl: Annotated[float, _NUMBER, Field(gt=0, le=1)] | None = None
-    # The engine counts steps in an unsigned 64-bit integer.
-    steps: Annotated[int, _INTEGER, Field(ge=0, lt=2**64)]
-    output_interval: Annotated[int, _INTEGER, Field(ge=1, lt=2**64)]
+    # Steps are counted in 64-bit integers (Simulation.step takes fewer than 2**63 at once).
+    steps: Annotated[int, _INTEGER, Field(ge=0, lt=2**63)]
+    output_interval: Annotated[int, _INTEGER, Field(ge=1, lt=2**63)]
 
     @model_validator(mode="after")
     def _dt_or_cfl(self) -> Time:

@@ -351,13 +351,12 @@ impl Scene {
         }
         // In floating point first: a huge height must not wrap an integer cast.
         let nodes_f = (g.resolution as Real + 5.0) * (ny.round() + 5.0);
-        let nodes = nodes_f.min(u64::MAX as Real) as u64;
         if nodes_f > MAX_GRID_NODES as Real {
             return Err(SceneError::new(
                 "grid.resolution",
                 format!(
-                    "the grid would have {nodes} nodes (about {} MB); at most {MAX_GRID_NODES} are allowed",
-                    nodes * GRID_BYTES_PER_NODE / 1_000_000
+                    "the grid would have {nodes_f:.3e} nodes (about {:.3e} MB); at most {MAX_GRID_NODES} are allowed",
+                    nodes_f * GRID_BYTES_PER_NODE as Real / 1e6
                 ),
             ));
         }
@@ -492,6 +491,7 @@ impl Scene {
         let layout = self.layout()?;
         let nodes = layout.num_nodes() as u64;
         let h = layout.h;
+        let domain_area = self.grid.domain[0] * self.grid.domain[1];
         let mut particles = 0.0 as Real;
         let mut largest = (0.0 as Real, None);
         for (b, body) in self.bodies.iter().enumerate() {
@@ -510,7 +510,8 @@ impl Scene {
                     0.5 * twice.abs() * scale * scale
                 }
             };
-            let count = area / (spacing * spacing);
+            // At most the domain's area: a body reaching outside it is refused when built, not here.
+            let count = area.min(domain_area) / (spacing * spacing);
             if count.is_finite() && count > 0.0 {
                 particles += count;
                 if count > largest.0 {
@@ -518,14 +519,16 @@ impl Scene {
                 }
             }
         }
-        let particles = particles.min(u64::MAX as Real / PARTICLE_BYTES as Real) as u64;
-        let particle_bytes = particles * PARTICLE_BYTES;
-        let grid_bytes = nodes * GRID_BYTES_PER_NODE;
+        // In floating point, saturating: a tiny seeding spacing must not wrap the byte count.
+        let particle_bytes = particles * PARTICLE_BYTES as Real;
+        let grid_bytes = nodes as Real * GRID_BYTES_PER_NODE as Real;
         let key = match largest.1 {
             Some(b) if particle_bytes > grid_bytes => format!("bodies[{b}].seeding"),
             _ => "grid.resolution".to_string(),
         };
-        Ok(MemoryEstimate { bytes: particle_bytes + grid_bytes, particles, nodes, key })
+        let saturate = |v: Real| if v >= u64::MAX as Real { u64::MAX } else { v as u64 };
+        let (bytes, particles) = (saturate(particle_bytes + grid_bytes), saturate(particles));
+        Ok(MemoryEstimate { bytes, particles, nodes, key })
     }
 
     /// Validates the scene and builds the simulation. Returns warnings beside it.
@@ -564,7 +567,14 @@ impl Scene {
             if outside > 0 {
                 return Err(SceneError::new(
                     key,
-                    format!("body lies partly outside the walls ({outside} of {} particles)", particles.len() - first),
+                    if outside == particles.len() - first {
+                        format!("body lies outside the walls (all {outside} particles)")
+                    } else {
+                        format!(
+                            "body lies partly outside the walls ({outside} of {} particles)",
+                            particles.len() - first
+                        )
+                    },
                 ));
             }
         }

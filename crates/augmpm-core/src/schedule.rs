@@ -257,22 +257,27 @@ impl<const D: usize> Schedule<D> {
         if drift.is_nan() || drift < 0.0 {
             return Err(format!("drift must be non-negative, got {drift}"));
         }
-        if drift.is_infinite() {
-            // Not binned (or binning forgotten): the next step bins afresh, the saved run did too.
+        if drift > SLACK {
+            // Not binned, binning forgotten, or due: the next step bins afresh, as the saved run's did.
             self.invalidate();
             return Ok(());
         }
+        // Each particle must lie within `drift` cells of its block (its binning plus the motion
+        // since), or the scatter's reach check could fail before the next binning. A few roundings
+        // of tolerance absorb those of the saved drift and positions (a state crafted within them of
+        // the edge could still trip the reach check: a panic, caught by the bindings, never a race).
         let inv_h = 1.0 / layout.h;
-        let slack = SLACK as i64;
         for (p, (xp, &b)) in x.iter().zip(bins).enumerate() {
             if b as usize >= self.num_blocks() {
                 return Err(format!("particle {p}: block {b} is not one of the grid's {} blocks", self.num_blocks()));
             }
             let c = self.block_coord(b as usize);
             let within = (0..D).all(|k| {
-                let o = floor_i64(xp[k] * inv_h - 0.5).saturating_add(crate::grid::GHOST);
-                let lo = (c[k] * BLOCK) as i64 - slack;
-                xp[k].is_finite() && lo <= o && o <= lo + BLOCK as i64 - 1 + 2 * slack
+                // Ghost-shifted coordinate whose floor is the stencil origin.
+                let u = xp[k] * inv_h - 0.5 + crate::grid::GHOST as Real;
+                let lo = (c[k] * BLOCK) as Real;
+                let reach = drift + 8.0 * Real::EPSILON * (u.abs() + 1.0);
+                u.is_finite() && lo - reach <= u && u < lo + BLOCK as Real + reach
             });
             if !within || !stencil_in_grid(layout, xp, inv_h) {
                 return Err(format!("particle {p} is not within reach of its block {b}"));

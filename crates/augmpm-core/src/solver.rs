@@ -362,8 +362,13 @@ where
         if !(state.density.is_empty() || state.density.len() == n) {
             return Err(format!("density has {} entries for {n} particles", state.density.len()));
         }
-        if let Some(i) = p.material.iter().position(|&m| m as usize >= self.model.materials.len()) {
-            return Err(format!("particle {i}: material {} of {}", p.material[i], self.model.materials.len()));
+        // One material per body (see `Scene::build`).
+        let bodies = self.model.materials.len();
+        if let Some(i) = p.material.iter().position(|&m| m as usize >= bodies) {
+            return Err(format!("particle {i}: material {} of {bodies}", p.material[i]));
+        }
+        if let Some(i) = p.body.iter().position(|&b| b as usize >= bodies) {
+            return Err(format!("particle {i}: body {} of {bodies}", p.body[i]));
         }
         let finite = |a: &[Real]| a.iter().all(|v| v.is_finite());
         let vectors_finite = |a: &[Vector<D>]| a.iter().all(|v| v.iter().all(|x| x.is_finite()));
@@ -398,13 +403,20 @@ where
         self.particles = particles;
         self.scratch.density = density;
         self.failed = None;
+        // The grid is cleared only where the binning says particles were: start from a clean one.
+        let grid = &mut self.scratch.grid;
+        grid.mass.fill(0.0);
+        grid.spline_mass.fill(0.0);
+        grid.momentum.fill(Vector::<D>::zeros());
+        self.scratch.density_mass.fill(0.0);
         Ok(())
     }
 
     fn step_here(&mut self) -> Result<(), StepError> {
         let step = self.step + 1;
-        let cause = likely_cause(self.model.dt, self.model.stable_dt());
-        let left = |OutOfGrid(particle)| StepError::LeftGrid { step, particle, cause: cause.clone() };
+        let (dt, stable_dt) = (self.model.dt, self.model.stable_dt());
+        let cause = move || likely_cause(dt, stable_dt);
+        let left = |OutOfGrid(particle)| StepError::LeftGrid { step, particle, cause: cause() };
         let Self { model, particles, scratch, times, .. } = self;
         let layout = &model.layout;
         let dt = model.dt;
@@ -474,10 +486,10 @@ where
         self.time += dt;
         self.last_move = cells;
         let error = match (outcome.non_finite, outcome.left_grid) {
-            (Some(particle), _) => Some(StepError::NonFinite { step, particle, cause }),
-            (None, Some(particle)) => Some(StepError::LeftGrid { step, particle, cause }),
+            (Some(particle), _) => Some(StepError::NonFinite { step, particle, cause: cause() }),
+            (None, Some(particle)) => Some(StepError::LeftGrid { step, particle, cause: cause() }),
             (None, None) if cells > MAX_CELLS_PER_STEP => {
-                Some(StepError::Unstable { step, particle: outcome.fastest, cells, cause })
+                Some(StepError::Unstable { step, particle: outcome.fastest, cells, cause: cause() })
             }
             (None, None) => None,
         };

@@ -37,6 +37,38 @@ fn restored_run_is_bitwise_identical() {
     }
 }
 
+/// A state saved when a re-binning is due (drift past the slack: particles up to 3 cells from
+/// their blocks) is accepted, and a state restored into a simulation that already ran elsewhere
+/// (its grid holding values in other blocks) continues exactly like the original.
+#[test]
+fn restore_when_rebinning_is_due_and_into_a_used_simulation() {
+    let mut whole = build(DROP, Method::Augmented);
+    let mut saved = whole.state();
+    while saved.drift <= augmpm_core::schedule::SLACK || !saved.drift.is_finite() {
+        whole.advance(1).unwrap();
+        saved = whole.state();
+    }
+    whole.advance(40).unwrap();
+
+    // Between binnings (the grid is then cleared only on the blocks the binning names), into a
+    // simulation whose particles had reached other blocks.
+    let mut original = build(DROP, Method::Augmented);
+    original.advance(70).unwrap();
+    let between = original.state();
+    assert!(between.drift <= augmpm_core::schedule::SLACK);
+    original.advance(150).unwrap();
+    let mut used = build(DROP, Method::Augmented);
+    used.advance(300).unwrap();
+    used.restore(between).unwrap();
+    used.advance(150).unwrap();
+    assert!(used.state() == original.state(), "restored into a used simulation: the state differs");
+
+    let mut fresh = build(DROP, Method::Augmented);
+    fresh.restore(saved).unwrap();
+    fresh.advance(40).unwrap();
+    assert!(fresh.state() == whole.state(), "restored when re-binning was due: the state differs");
+}
+
 /// A state that does not fit the model is refused with a reason, and the simulation is unchanged.
 #[test]
 fn restore_refuses_a_state_that_does_not_fit() {
@@ -59,6 +91,9 @@ fn restore_refuses_a_state_that_does_not_fit() {
     let mut s = good.clone();
     s.particles.x[0].x += 0.5; // 16 cells from where it was binned
     refused(&mut sim, s, "not within reach");
+    let mut s = good.clone();
+    s.particles.body[1] = 1;
+    refused(&mut sim, s, "body 1");
     let mut s = good.clone();
     s.bins[0] = u32::MAX - 1;
     refused(&mut sim, s, "not one of the grid's");

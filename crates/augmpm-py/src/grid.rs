@@ -40,8 +40,10 @@ impl PyGrid {
     /// Positions (m) of the regular nodes, ghosts included, shape (N, 2).
     #[getter]
     fn nodes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let xs: Vec<Vector2<f64>> = (0..self.layout.num_nodes()).map(|i| self.layout.position(i)).collect();
-        vectors_to_array(py, &xs)
+        guard(|| {
+            let xs: Vec<Vector2<f64>> = (0..self.layout.num_nodes()).map(|i| self.layout.position(i)).collect();
+            vectors_to_array(py, &xs)
+        })
     }
 
     /// Whether each regular node takes part in the interpolation, shape (N,).

@@ -313,10 +313,12 @@ impl PySimulation {
 
     /// Heap bytes of the particle state, the per-particle scratch and the grid.
     fn memory_use<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let (particles, scratch, grid) = with_sim!(&self.engine, s, core => {
-            let m = s.memory_use();
-            (m.particles, m.particle_scratch, m.grid)
-        });
+        let (particles, scratch, grid) = guard(|| {
+            Ok(with_sim!(&self.engine, s, core => {
+                let m = s.memory_use();
+                (m.particles, m.particle_scratch, m.grid)
+            }))
+        })?;
         let d = PyDict::new(py);
         d.set_item("particles", particles)?;
         d.set_item("particle_scratch", scratch)?;
@@ -326,10 +328,12 @@ impl PySimulation {
 
     /// Wall-clock seconds spent so far in each stage of the step: sort, density, boundary, p2g, grid, g2p.
     fn stage_times<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let t = with_sim!(&self.engine, s, core => {
-            let t = s.stage_times();
-            [t.sort, t.density, t.boundary, t.p2g, t.grid, t.g2p]
-        });
+        let t = guard(|| {
+            Ok(with_sim!(&self.engine, s, core => {
+                let t = s.stage_times();
+                [t.sort, t.density, t.boundary, t.p2g, t.grid, t.g2p]
+            }))
+        })?;
         let d = PyDict::new(py);
         for (k, v) in ["sort", "density", "boundary", "p2g", "grid", "g2p"].into_iter().zip(t) {
             d.set_item(k, v)?;
@@ -365,20 +369,22 @@ impl PySimulation {
 
     /// Index of each particle's body, shape (N,).
     #[getter]
-    fn body<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i32>> {
-        with_sim!(&self.engine, s, core => PyArray1::from_iter(py, s.particles.body.iter().map(|&b| b as i32)))
+    fn body<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<i32>>> {
+        guard(|| {
+            Ok(with_sim!(&self.engine, s, core => PyArray1::from_iter(py, s.particles.body.iter().map(|&b| b as i32))))
+        })
     }
 
     /// Particle masses (kg/m in 2D), shape (N,).
     #[getter]
-    fn masses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        with_sim!(&self.engine, s, core => scalars_to_array(py, &s.particles.mass))
+    fn masses<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        guard(|| Ok(with_sim!(&self.engine, s, core => scalars_to_array(py, &s.particles.mass))))
     }
 
     /// Fluid density of each particle gathered from the regular grid in the last step (kg/m²), shape (N,).
     #[getter]
-    fn densities<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        with_sim!(&self.engine, s, core => scalars_to_array(py, s.grid_density()))
+    fn densities<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        guard(|| Ok(with_sim!(&self.engine, s, core => scalars_to_array(py, s.grid_density()))))
     }
 
     #[getter]
@@ -406,8 +412,8 @@ impl PySimulation {
 
     /// The materials' stable time step (s) on this grid.
     #[getter]
-    fn stable_dt(&self) -> f64 {
-        with_sim!(&self.engine, s, core => wide(s.model.stable_dt()))
+    fn stable_dt(&self) -> PyResult<f64> {
+        guard(|| Ok(with_sim!(&self.engine, s, core => wide(s.model.stable_dt()))))
     }
 
     /// Grid cell width h (m).
