@@ -285,7 +285,12 @@ def load_checkpoint(path: Path) -> tuple[dict, dict[str, np.ndarray]]:
         raise _plain_error("--resume", f"{path} is not a readable checkpoint ({type(e).__name__}: {e})") from None
     types = {"format": int, "scene": str, "method": str, "total_steps": int, "frame": int, "done": int}
     types |= {"render": bool, "augmpm": str}
-    if not isinstance(meta, dict) or any(not isinstance(meta.get(k), t) for k, t in types.items()):
+    if (
+        not isinstance(meta, dict)
+        or any(not isinstance(meta.get(k), t) for k, t in types.items())
+        or meta["frame"] < 0
+        or meta["done"] < 0
+    ):
         raise _plain_error("--resume", f"{path} is not a checkpoint augmpm wrote (its metadata is incomplete)")
     if meta["format"] != _CHECKPOINT_FORMAT or meta["augmpm"] != _core.__version__:
         raise _plain_error(
