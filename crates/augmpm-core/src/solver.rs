@@ -414,10 +414,10 @@ where
 
     fn step_here(&mut self) -> Result<(), StepError> {
         let step = self.step + 1;
-        let (dt, stable_dt) = (self.model.dt, self.model.stable_dt());
-        let cause = move || likely_cause(dt, stable_dt);
-        let left = |OutOfGrid(particle)| StepError::LeftGrid { step, particle, cause: cause() };
         let Self { model, particles, scratch, times, .. } = self;
+        // Only a failing step pays for the stable-dt bound the message quotes.
+        let cause = || likely_cause(model.dt, model.stable_dt());
+        let left = |OutOfGrid(particle)| StepError::LeftGrid { step, particle, cause: cause() };
         let layout = &model.layout;
         let dt = model.dt;
         let mut clock = Instant::now();

@@ -71,19 +71,3 @@ fn runs_are_reproducible() {
     assert_eq!(a.particles.x, b.particles.x);
     assert_eq!(a.particles.v, b.particles.v);
 }
-
-/// A time step far above the stable bound makes the state blow up; the step reports it
-/// with the step number instead of running on with NaNs.
-#[test]
-fn blow_up_is_reported() {
-    let mut sim = build(
-        r#"{"gravity": [0.0, -9.81], "grid": {"domain": [1.0, 1.0], "resolution": 32},
-            "time": {"dt": 0.05, "steps": 100, "output_interval": 10},
-            "bodies": [{"shape": "box", "min": [0.3, 0.0], "max": [0.7, 0.2],
-                        "material": {"type": "elastic", "density": 1000.0, "youngs_modulus": 1e7, "poisson_ratio": 0.3}}]}"#,
-    );
-    let err = sim.advance(1000).unwrap_err();
-    let msg = err.to_string();
-    assert!(msg.contains("step") && msg.contains("particle"), "{msg}");
-    assert!(sim.step < 1000);
-}

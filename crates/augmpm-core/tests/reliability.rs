@@ -50,8 +50,9 @@ fn restore_when_rebinning_is_due_and_into_a_used_simulation() {
     }
     whole.advance(40).unwrap();
 
-    // Between binnings (the grid is then cleared only on the blocks the binning names), into a
-    // simulation whose particles had reached other blocks.
+    // Between binnings, into a simulation whose particles had been elsewhere. (Restore also clears
+    // the whole grid, which the step otherwise clears only where the binning says particles were;
+    // this scene does not show a difference without that clearing, so it is not what is tested.)
     let mut original = build(DROP, Method::Augmented);
     original.advance(70).unwrap();
     let between = original.state();
