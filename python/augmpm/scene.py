@@ -122,6 +122,8 @@ class Fluid(_Strict):
     gamma: PositiveFloat = 7.0
     viscosity: Annotated[float, _NUMBER, Field(ge=0, allow_inf_nan=False)] = 0.0
     min_pressure: Annotated[float, _NUMBER, Field(le=0, allow_inf_nan=False)] = 0.0
+    #: Where ρ comes from: "deformation" (ρ0/J, J̇ = J tr ∇v; default) or "grid" (scattered masses, the paper's).
+    density_estimate: Literal["deformation", "grid"] = "deformation"
 
 
 class _Solid(_Strict):
@@ -210,6 +212,8 @@ class Augmented(_Strict):
 
     delta: Annotated[float, _NUMBER, Field(ge=0, lt=1.5)] = 0.25
     spacing: Annotated[float, _NUMBER, Field(gt=0.05, le=1.0)] = 1.0
+    #: "stable" (default: energy-stable transfer fitted to the wall value) or "paper" (the paper's φ transfer).
+    transfer: Literal["stable", "paper"] = "stable"
 
 
 class Scene(_Strict):

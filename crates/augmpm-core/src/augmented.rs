@@ -9,6 +9,21 @@ use crate::grid::GridLayout;
 use crate::kernel::{weight, MlsInverse, MlsKind, Moments, Stencil};
 use crate::math::{floor_i64, DimOps, Real, Vector};
 use crate::transfer::OutOfGrid;
+use serde::{Deserialize, Serialize};
+
+/// How mass and momentum move between particles and the augmented grid (`augmented.transfer`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AugmentedTransfer {
+    /// Energy-stable: P2G with the particle's normalised B-spline weights `w / Σw` (the transpose
+    /// of the G2P fit), G2P fitted to the wall value at the particle's foot on each wall in reach
+    /// ([`crate::wall_fit`]); no velocity clamp, no mass floor.
+    #[default]
+    Stable,
+    /// The paper's: P2G with the MLS shape function φ (eq. (6)), G2P the fit of eq. (4), with
+    /// augmpm's two safety nets, the low-mass floor and the hold of particles past a wall.
+    Paper,
+}
 
 /// A point sampled on a wall, carrying the wall's outward normal(s).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -74,6 +89,8 @@ pub struct AugmentedGrid<const D: usize> {
     pub delta: Real,
     /// Per cell (cell = node at its lower corner): the whole cell lies inside the material region.
     cell_inside: Vec<bool>,
+    /// How particles and grid exchange mass and momentum.
+    pub transfer: AugmentedTransfer,
 }
 
 impl<const D: usize> AugmentedGrid<D> {
@@ -141,7 +158,14 @@ impl<const D: usize> AugmentedGrid<D> {
                 region.distance(&centre).distance < -half_diagonal
             })
             .collect();
-        Self { points, included, closed_form, cell_start, cell_points, walls, delta, cell_inside }
+        let transfer = AugmentedTransfer::default();
+        Self { points, included, closed_form, cell_start, cell_points, walls, delta, cell_inside, transfer }
+    }
+
+    /// The same grid with transfer `transfer`.
+    pub fn with_transfer(mut self, transfer: AugmentedTransfer) -> Self {
+        self.transfer = transfer;
+        self
     }
 
     /// Heap bytes of the boundary points, node flags and the per-cell index.
@@ -288,16 +312,17 @@ impl<const D: usize> AugmentedGrid<D> {
         if self.takes_closed_form(layout, x, p)? {
             return Ok((MlsInverse::regular(layout.h), MlsKind::Regular, NearPoints::NONE));
         }
-        self.general_inverse::<Ops>(layout, x, p)
+        self.general_inverse::<Ops>(layout, x, p).map(|(minv, kind, near, _)| (minv, kind, near))
     }
 
-    /// The general inverse of eq. (5) over the included nodes and boundary points at `x`.
+    /// The general inverse of eq. (5) over the included nodes and boundary points at `x`, and
+    /// the sum of their weights Σw.
     pub fn general_inverse<Ops: DimOps<D>>(
         &self,
         layout: &GridLayout<D>,
         x: &Vector<D>,
         p: usize,
-    ) -> Result<(MlsInverse<D>, MlsKind, NearPoints), OutOfGrid> {
+    ) -> Result<(MlsInverse<D>, MlsKind, NearPoints, Real), OutOfGrid> {
         let mut m = Moments::new();
         self.for_each_node(layout, x, p, &mut |_, w, d| m.add(w, &d))?;
         let mut near = NearPoints::NONE;
@@ -306,7 +331,7 @@ impl<const D: usize> AugmentedGrid<D> {
             near.push(b);
         });
         let (minv, kind) = MlsInverse::from_moments::<Ops>(&m, layout.h);
-        Ok((minv, kind, near))
+        Ok((minv, kind, near, m.a))
     }
 
     /// MLS reconstruction (eq. (4)) at `x` of a scalar field given at the grid points
@@ -349,10 +374,12 @@ impl<const D: usize> AugmentedGrid<D> {
 pub struct WallParticles<const D: usize> {
     /// Per particle: its entry in the table, or [`WallParticles::NONE`].
     slot: Vec<u32>,
-    /// Per entry: the particle, its inverse and the boundary points it sees.
+    /// Per entry: the particle, its inverse, the boundary points it sees and the sum Σw of the
+    /// weights of its grid points.
     particle: Vec<u32>,
     minv: Vec<MlsInverse<D>>,
     near: Vec<NearPoints>,
+    total: Vec<Real>,
 }
 
 impl<const D: usize> WallParticles<D> {
@@ -388,30 +415,33 @@ impl<const D: usize> WallParticles<D> {
         let m = self.particle.len();
         self.minv.resize(m, MlsInverse::regular(layout.h));
         self.near.resize(m, NearPoints::NONE);
+        self.total.resize(m, 0.0);
         self.minv
             .par_iter_mut()
             .zip(self.near.par_iter_mut())
+            .zip(self.total.par_iter_mut())
             .zip(self.particle.par_iter())
             .with_min_len(if parallel { 256 } else { usize::MAX })
-            .map(|((minv, near), &p)| {
+            .map(|(((minv, near), total), &p)| {
                 let kind;
-                (*minv, kind, *near) = grid.general_inverse::<Ops>(layout, &x[p as usize], p as usize)?;
+                (*minv, kind, *near, *total) = grid.general_inverse::<Ops>(layout, &x[p as usize], p as usize)?;
                 Ok(u64::from(matches!(kind, MlsKind::Regularized | MlsKind::Isolated)))
             })
             .sum()
     }
 
-    /// The table entry of particle `p`, if its MLS system sees a wall.
+    /// The table entry of particle `p`, if its MLS system sees a wall: its inverse, the boundary
+    /// points it sees and the sum of its grid points' weights Σw.
     #[inline]
-    pub fn entry(&self, p: usize) -> Option<(&MlsInverse<D>, &NearPoints)> {
-        let s = *self.slot.get(p)?;
-        (s != Self::NONE).then(|| (&self.minv[s as usize], &self.near[s as usize]))
+    pub fn entry(&self, p: usize) -> Option<(&MlsInverse<D>, &NearPoints, Real)> {
+        let s = *self.slot.get(p)? as usize;
+        (s != Self::NONE as usize).then(|| (&self.minv[s], &self.near[s], self.total[s]))
     }
 
     /// Heap bytes of the table (`slot` is per particle, the rest per particle near a wall).
     pub fn heap_bytes(&self) -> usize {
         use crate::math::heap_bytes as b;
-        b(&self.slot) + b(&self.particle) + b(&self.minv) + b(&self.near)
+        b(&self.slot) + b(&self.particle) + b(&self.minv) + b(&self.near) + b(&self.total)
     }
 
     /// Number of particles whose MLS system sees a wall.

@@ -20,9 +20,69 @@ pub struct WallDistance<const D: usize> {
     pub wall: usize,
 }
 
+/// The closest point of one wall face to a particle (the foot of the perpendicular).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WallFoot<const D: usize> {
+    /// Position on the wall (m).
+    pub x: Vector<D>,
+    /// Unit normal of the face there, out of the material, into the wall.
+    pub normal: Vector<D>,
+    /// Index of the wall in [`Region::distance`] order.
+    pub wall: usize,
+    /// Velocity of the wall surface there (m/s); only its tangential part acts.
+    pub velocity: Vector<D>,
+}
+
+/// Most wall faces a particle takes into account at once (a corner has two; a narrow gap more).
+pub const MAX_FEET: usize = 4;
+
+/// The feet of the wall faces in reach of one particle, nearest faces first found.
+#[derive(Clone, Copy, Debug)]
+pub struct WallFeet<const D: usize> {
+    len: usize,
+    feet: [Option<WallFoot<D>>; MAX_FEET],
+}
+
+impl<const D: usize> Default for WallFeet<D> {
+    fn default() -> Self {
+        Self { len: 0, feet: [None; MAX_FEET] }
+    }
+}
+
+impl<const D: usize> WallFeet<D> {
+    /// Adds a foot unless the same face point is already there (a polygon edge lying on the
+    /// domain box) or the list is full.
+    pub fn push(&mut self, foot: WallFoot<D>, tolerance: Real) {
+        let same = |f: &WallFoot<D>| (f.x - foot.x).norm() <= tolerance && f.normal.dot(&foot.normal) > 1.0 - 1e-6;
+        if self.len < MAX_FEET && !self.iter().any(same) {
+            self.feet[self.len] = Some(foot);
+            self.len += 1;
+        }
+    }
+
+    pub fn iter(&self) -> impl Iterator<Item = &WallFoot<D>> {
+        self.feet[..self.len].iter().flatten()
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+}
+
 /// A region the material may occupy, bounded by walls.
 pub trait Region<const D: usize>: Send + Sync {
     fn distance(&self, x: &Vector<D>) -> WallDistance<D>;
+
+    /// The feet on the wall faces that bound the region within `reach` (m) of `x`: on each
+    /// straight face whose perpendicular from `x` lands inside it, at each reflex corner `x` sees
+    /// past both faces, and on each circle. A region without walls has none.
+    fn wall_feet(&self, _x: &Vector<D>, _reach: Real) -> WallFeet<D> {
+        WallFeet::default()
+    }
 }
 
 /// A closed polygon given counter-clockwise.
@@ -160,6 +220,40 @@ impl Circle {
     }
 }
 
+/// How the surface of one wall moves (its geometry stays still).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceMotion {
+    /// Velocity of the surface (m/s); only its part along the wall acts.
+    pub velocity: Point,
+    /// Speed along the wall (m/s): counter-clockwise along a polygon, or around a circle's centre.
+    pub tangential_speed: Real,
+    /// Centre of a circular wall.
+    pub center: Option<Point>,
+}
+
+impl SurfaceMotion {
+    /// A wall whose surface does not move.
+    pub const STILL: Self = Self { velocity: Point::new(0.0, 0.0), tangential_speed: 0.0, center: None };
+
+    /// Surface velocity (m/s) near `x`, where the wall's outward normal is `n`.
+    pub fn at(&self, x: &Point, n: &Point) -> Point {
+        let tangent = match self.center {
+            Some(c) => {
+                let r = x - c;
+                let norm = r.norm();
+                if norm > 0.0 {
+                    Point::new(-r.y, r.x) / norm
+                } else {
+                    Point::zeros()
+                }
+            }
+            // Counter-clockwise along a polygon whose material is inside: the normal turned left.
+            None => Point::new(-n.y, n.x),
+        };
+        self.velocity + tangent * self.tangential_speed
+    }
+}
+
 /// Geometry of one wall.
 #[derive(Clone, Debug, PartialEq)]
 pub enum WallShape {
@@ -176,9 +270,12 @@ pub enum WallShape {
 pub struct Walls2 {
     pub walls: Vec<WallShape>,
     domain_box: Polygon,
+    /// How each wall's surface moves, the domain box last (still).
+    motions: Vec<SurfaceMotion>,
 }
 
 impl Walls2 {
+    /// Walls whose surfaces are still.
     pub fn new(walls: Vec<WallShape>, extent: Point) -> Self {
         let domain_box = Polygon::new(vec![
             Point::new(0.0, 0.0),
@@ -186,7 +283,21 @@ impl Walls2 {
             Point::new(extent.x, extent.y),
             Point::new(0.0, extent.y),
         ]);
-        Self { walls, domain_box }
+        let motions = vec![SurfaceMotion::STILL; walls.len() + 1];
+        Self { walls, domain_box, motions }
+    }
+
+    /// The same walls with their surfaces moving as `motions` (one per wall; the box stays still).
+    pub fn with_motions(mut self, motions: Vec<SurfaceMotion>) -> Self {
+        assert_eq!(motions.len(), self.walls.len(), "one surface motion per wall");
+        self.motions = motions;
+        self.motions.push(SurfaceMotion::STILL);
+        self
+    }
+
+    /// Velocity (m/s) of wall `wall`'s surface near `x`, where its outward normal is `n`.
+    pub fn surface_velocity(&self, wall: usize, x: &Point, n: &Point) -> Point {
+        self.motions[wall].at(x, n)
     }
 
     /// Index of the domain box among the walls.
@@ -276,6 +387,66 @@ impl Region<2> for Walls2 {
             _ => out,
         }
     }
+
+    fn wall_feet(&self, x: &Point, reach: Real) -> WallFeet<2> {
+        let mut feet = WallFeet::default();
+        // A face point counts only where it bounds the material region (a polygon edge inside
+        // another polygon, or the domain box beyond a container, does not).
+        let tolerance = Real::EPSILON.sqrt() * reach;
+        let mut add = |q: Point, normal: Point, wall: usize| {
+            if self.distance(&q).distance.abs() <= tolerance {
+                let velocity = self.surface_velocity(wall, &q, &normal);
+                feet.push(WallFoot { x: q, normal, wall, velocity }, tolerance);
+            }
+        };
+        let polygons = self
+            .walls
+            .iter()
+            .enumerate()
+            .filter_map(|(i, w)| match w {
+                WallShape::Polygon(p) => Some((i, p)),
+                WallShape::Circle(..) => None,
+            })
+            .chain(std::iter::once((self.box_index(), &self.domain_box)));
+        for (wall, poly) in polygons {
+            let n = poly.vertices.len();
+            // Where x's perpendicular lands on each edge, as a fraction of its length.
+            let along = |k: usize| {
+                let (a, b) = (poly.vertices[k], poly.vertices[(k + 1) % n]);
+                (x - a).dot(&(b - a)) / (b - a).norm_squared()
+            };
+            for k in 0..n {
+                let (a, b) = (poly.vertices[k], poly.vertices[(k + 1) % n]);
+                let e = b - a;
+                let t = along(k);
+                if t > 0.0 && t < 1.0 {
+                    let q = a + e * t;
+                    if (x - q).norm() < reach {
+                        add(q, Point::new(e.y, -e.x).normalize(), wall);
+                    }
+                }
+                // A reflex corner at a (the polygon turns clockwise there): x past the end of the
+                // edge before and before the start of this one sees the corner itself.
+                let before = a - poly.vertices[(k + n - 1) % n];
+                let d = (a - x).norm();
+                if before.perp(&e) < 0.0 && t <= 0.0 && along((k + n - 1) % n) >= 1.0 && d > 0.0 && d < reach {
+                    add(a, (a - x) / d, wall);
+                }
+            }
+        }
+        for (wall, w) in self.walls.iter().enumerate() {
+            if let WallShape::Circle(c, side) = w {
+                let r = x - c.center;
+                let norm = r.norm();
+                if norm > 0.0 && (norm - c.radius).abs() < reach {
+                    let radial = r / norm;
+                    let normal = if *side == Side::Outside { -radial } else { radial };
+                    add(c.center + radial * c.radius, normal, wall);
+                }
+            }
+        }
+        feet
+    }
 }
 
 #[cfg(test)]
@@ -321,6 +492,19 @@ mod tests {
                 assert!((w[1].x - w[0].x).norm() <= h * (1.0 + 1e-12));
             }
         }
+    }
+
+    /// A belt loop runs counter-clockwise along its polygon (+x on the floor, −x on the ceiling);
+    /// a spinning circle runs counter-clockwise around its centre.
+    #[test]
+    fn tangential_speed_runs_counter_clockwise() {
+        let belt = SurfaceMotion { velocity: Point::zeros(), tangential_speed: 2.0, center: None };
+        assert_eq!(belt.at(&Point::new(0.5, 0.0), &Point::new(0.0, -1.0)), Point::new(2.0, 0.0));
+        assert_eq!(belt.at(&Point::new(0.5, 1.0), &Point::new(0.0, 1.0)), Point::new(-2.0, 0.0));
+        let spin =
+            SurfaceMotion { velocity: Point::zeros(), tangential_speed: 3.0, center: Some(Point::new(0.5, 0.5)) };
+        let v = spin.at(&Point::new(0.7, 0.5), &Point::new(-1.0, 0.0));
+        assert!((v - Point::new(0.0, 3.0)).norm() < 1e-15);
     }
 
     #[test]

@@ -3,6 +3,7 @@
 //! Layers, bottom up: [`math`] (dimension-generic types), [`kernel`]
 //! (B-spline weights, MLS shape functions), [`grid`], [`particles`],
 //! [`material`] (constitutive models), [`geometry`] and [`boundary`] (walls),
+//! [`augmented`] and [`wall_fit`] (the augmented grid and its wall fit),
 //! [`transfer`] (the stages of a step), [`solver`] (model, state, step) and
 //! [`scene`] (building a simulation from a scene description).
 
@@ -21,6 +22,7 @@ pub mod scene;
 pub mod schedule;
 pub mod solver;
 pub mod transfer;
+pub mod wall_fit;
 
 pub use boundary::{Method, WallCondition};
 pub use scene::{MemoryEstimate, Scene, SceneError};

@@ -1,9 +1,9 @@
 //! Scene description (the resolved form of a scene file) and how a 2D
 //! simulation is built from it: validation, walls, particle seeding.
 
-use crate::augmented::AugmentedGrid;
+use crate::augmented::{AugmentedGrid, AugmentedTransfer};
 use crate::boundary::{Method, NaiveBoundary, WallCondition};
-use crate::geometry::{Circle, Point, Polygon, Region, Side, WallShape, Walls2};
+use crate::geometry::{Circle, Point, Polygon, Region, Side, SurfaceMotion, WallShape, Walls2};
 use crate::grid::GridLayout;
 use crate::material::Material;
 use crate::math::Real;
@@ -197,6 +197,10 @@ pub struct AugmentedSpec {
     /// Largest spacing of the boundary points along a wall, in cell widths.
     #[serde(default = "default_spacing")]
     pub spacing: Real,
+    /// How particles and the augmented grid exchange mass and momentum: `stable` (default) or
+    /// `paper` (the paper's φ-weighted transfer with augmpm's safety nets).
+    #[serde(default)]
+    pub transfer: AugmentedTransfer,
 }
 
 fn default_spacing() -> Real {
@@ -209,7 +213,7 @@ fn default_delta() -> Real {
 
 impl Default for AugmentedSpec {
     fn default() -> Self {
-        Self { delta: default_delta(), spacing: default_spacing() }
+        Self { delta: default_delta(), spacing: default_spacing(), transfer: AugmentedTransfer::default() }
     }
 }
 
@@ -255,36 +259,6 @@ impl MemoryEstimate {
                 mb(available)
             ),
         ))
-    }
-}
-
-/// How the surface of one wall moves (its geometry stays still).
-#[derive(Clone, Copy, Debug)]
-struct SurfaceMotion {
-    velocity: Point,
-    /// Speed along the wall: counter-clockwise along a polygon, or around a circle's centre.
-    tangential_speed: Real,
-    /// Centre of a circular wall.
-    center: Option<Point>,
-}
-
-impl SurfaceMotion {
-    /// Surface velocity (m/s) near `x`, where the wall's outward normal is `n`.
-    fn at(&self, x: &Point, n: &Point) -> Point {
-        let tangent = match self.center {
-            Some(c) => {
-                let r = x - c;
-                let norm = r.norm();
-                if norm > 0.0 {
-                    Point::new(-r.y, r.x) / norm
-                } else {
-                    Point::zeros()
-                }
-            }
-            // Counter-clockwise along a polygon whose material is inside: the normal turned left.
-            None => Point::new(-n.y, n.x),
-        };
-        self.velocity + tangent * self.tangential_speed
     }
 }
 
@@ -363,8 +337,8 @@ impl Scene {
         Ok(GridLayout::new(h, [g.resolution, ny.round() as usize]))
     }
 
-    /// The walls, each wall's condition (the domain box last) and each wall's surface motion.
-    fn walls(&self, extent: Point) -> Result<(Walls2, Vec<WallCondition>, Vec<SurfaceMotion>), SceneError> {
+    /// The walls (with their surfaces' motion) and each wall's condition, the domain box last.
+    fn walls(&self, extent: Point) -> Result<(Walls2, Vec<WallCondition>), SceneError> {
         let mut shapes = Vec::new();
         let mut conditions = Vec::new();
         let mut motions = Vec::new();
@@ -411,8 +385,7 @@ impl Scene {
         }
         // The domain box, always a wall, still.
         conditions.push(self.wall_condition);
-        motions.push(SurfaceMotion { velocity: Point::zeros(), tangential_speed: 0.0, center: None });
-        Ok((Walls2::new(shapes, extent), conditions, motions))
+        Ok((Walls2::new(shapes, extent).with_motions(motions), conditions))
     }
 
     fn dt(&self, model_stable_dt: Real) -> Result<(Real, Option<String>), SceneError> {
@@ -456,8 +429,8 @@ impl Scene {
         let layout = self.layout()?;
         let h = layout.h;
         let extent = Point::new(layout.extent()[0], layout.extent()[1]);
-        let (region, conditions, motions) = self.walls(extent)?;
-        let surface = |wall: usize, x: &Point, n: &Point| motions[wall].at(x, n);
+        let (region, conditions) = self.walls(extent)?;
+        let surface = |wall: usize, x: &Point, n: &Point| region.surface_velocity(wall, x, n);
         let boundary = match method {
             Method::Naive => Boundary::Naive(NaiveBoundary::new(&layout, &region, conditions, surface)),
             Method::Augmented => {
@@ -479,7 +452,10 @@ impl Scene {
                 for p in &mut points {
                     p.velocity = surface(p.wall, &p.x, &p.normals[0]);
                 }
-                Boundary::Augmented(AugmentedGrid::new(&layout, &region, points, conditions, delta * h))
+                Boundary::Augmented(
+                    AugmentedGrid::new(&layout, &region, points, conditions, delta * h)
+                        .with_transfer(self.augmented.transfer),
+                )
             }
         };
         Ok((layout, region, boundary))
@@ -695,22 +671,4 @@ fn seed_body(
         out.push(p, v, mass, vol0, index as u32, index as u32);
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A belt loop runs counter-clockwise along its polygon (+x on the floor, −x on the ceiling);
-    /// a spinning circle runs counter-clockwise around its centre.
-    #[test]
-    fn tangential_speed_runs_counter_clockwise() {
-        let belt = SurfaceMotion { velocity: Point::zeros(), tangential_speed: 2.0, center: None };
-        assert_eq!(belt.at(&Point::new(0.5, 0.0), &Point::new(0.0, -1.0)), Point::new(2.0, 0.0));
-        assert_eq!(belt.at(&Point::new(0.5, 1.0), &Point::new(0.0, 1.0)), Point::new(-2.0, 0.0));
-        let spin =
-            SurfaceMotion { velocity: Point::zeros(), tangential_speed: 3.0, center: Some(Point::new(0.5, 0.5)) };
-        let v = spin.at(&Point::new(0.7, 0.5), &Point::new(-1.0, 0.0));
-        assert!((v - Point::new(0.0, 3.0)).norm() < 1e-15);
-    }
 }

@@ -54,6 +54,10 @@ where
         self.materials.iter().any(ConstitutiveModel::<D>::needs_grid_density)
     }
 
+    fn smooths_volume_ratio(&self) -> bool {
+        self.materials.iter().any(ConstitutiveModel::<D>::smooths_volume_ratio)
+    }
+
     /// The smallest stable time step (s) of the model's materials on its grid.
     pub fn stable_dt(&self) -> Real {
         self.materials
@@ -139,6 +143,8 @@ struct Scratch<const D: usize> {
     grid: GridState<D>,
     /// B-spline grid mass of the density estimate (fluids only; empty otherwise).
     density_mass: Vec<Real>,
+    /// Per node, mass and mass·J of the particles whose J is smoothed (empty when none is).
+    volume_ratio: Vec<(Real, Real)>,
     density: Vec<Real>,
     /// Particles whose MLS system sees a wall, with their inverses (augmented grid only).
     walls: WallParticles<D>,
@@ -226,6 +232,11 @@ where
             schedule: Schedule::new(&model.layout),
             grid: GridState::new(model.boundary.num_points(&model.layout)),
             density_mass: if density { vec![0.0; model.layout.num_nodes()] } else { Vec::new() },
+            volume_ratio: if model.smooths_volume_ratio() {
+                vec![(0.0, 0.0); model.layout.num_nodes()]
+            } else {
+                Vec::new()
+            },
             density: vec![0.0; n],
             walls: WallParticles::default(),
         };
@@ -276,6 +287,7 @@ where
             particle_scratch: b(&s.density) + s.schedule.particle_bytes() + s.walls.heap_bytes(),
             grid: s.grid.heap_bytes()
                 + b(&s.density_mass)
+                + b(&s.volume_ratio)
                 + s.schedule.block_bytes()
                 + self.model.wall_fraction.as_ref().map_or(0, b)
                 + boundary,
@@ -409,6 +421,7 @@ where
         grid.spline_mass.fill(0.0);
         grid.momentum.fill(Vector::<D>::zeros());
         self.scratch.density_mass.fill(0.0);
+        self.scratch.volume_ratio.fill((0.0, 0.0));
         Ok(())
     }
 
@@ -427,7 +440,7 @@ where
             clock = now;
         };
 
-        let Scratch { schedule, grid, density_mass, density, walls } = scratch;
+        let Scratch { schedule, grid, density_mass, volume_ratio, density, walls } = scratch;
         schedule.prepare(layout, &particles.x).map_err(left)?;
         density.resize(particles.len(), 0.0);
         let nodes = layout.num_nodes();
@@ -447,6 +460,20 @@ where
         grid.momentum[nodes..].fill(Vector::<D>::zeros());
         lap(&mut times.sort);
 
+        if !volume_ratio.is_empty() {
+            schedule.clear(layout, schedule.stale(), volume_ratio, (0.0, 0.0));
+            let smooths: Vec<bool> = model.materials.iter().map(ConstitutiveModel::<D>::smooths_volume_ratio).collect();
+            let material = &particles.material;
+            transfer::smooth_volume_ratio(
+                layout,
+                schedule,
+                &particles.x,
+                &particles.mass,
+                &mut particles.jp,
+                |p| smooths[material[p] as usize],
+                volume_ratio,
+            );
+        }
         let grid_density = if density_mass.is_empty() {
             None
         } else {

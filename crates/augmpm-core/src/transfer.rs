@@ -6,7 +6,7 @@
 //! Particle→grid stages scatter through a [`Schedule`] (coloured blocks, no atomics,
 //! bitwise reproducible for any thread count); grid→particle stages are per particle.
 
-use crate::augmented::{AugmentedGrid, WallParticles};
+use crate::augmented::{AugmentedGrid, AugmentedTransfer, WallParticles};
 use crate::geometry::Region;
 use crate::grid::{GridLayout, GridState};
 use crate::kernel::Stencil;
@@ -39,6 +39,59 @@ pub fn scatter_mass<const D: usize>(
             let mp = mass[p as usize];
             // SAFETY: blocks scattered together never share a node (see `schedule`).
             s.for_each(layout.h, |o, w, _| unsafe { out.update(origin + layout.offset(&o), |m| *m += w * mp) });
+        }
+    });
+}
+
+/// Smooths the volume ratio J of the particles that keep their density in it (`smooths(p)`: fluids
+/// with `density_estimate = "deformation"`) over the grid, as the J-bar methods of MPM do: node
+/// values `J_i = Σ_p w_ip m_p J_p / Σ_p w_ip m_p`, then `J_p ← Σ_i w_ip J_i`. The sub-cell part of J,
+/// which no grid force can see or correct, is removed, and `Σ m_p J_p` (the total volume) is kept
+/// exactly; the averages are normalised, so a free surface or a wall does not bias them.
+/// `grid` (mass, mass·J per node) must be zero on the schedule's active blocks.
+pub fn smooth_volume_ratio<const D: usize>(
+    layout: &GridLayout<D>,
+    schedule: &Schedule<D>,
+    x: &[Vector<D>],
+    mass: &[Real],
+    jp: &mut [Real],
+    smooths: impl Fn(usize) -> bool + Sync,
+    grid: &mut [(Real, Real)],
+) {
+    let inv_h = 1.0 / layout.h;
+    {
+        let out = Disjoint::new(grid);
+        let jp = &*jp;
+        schedule.for_each_block(|reach, block| {
+            for &p in block {
+                let p = p as usize;
+                if !smooths(p) {
+                    continue;
+                }
+                let (s, origin) = stencil(layout, &x[p], inv_h);
+                reach.check(&s.base);
+                let (m, mj) = (mass[p], mass[p] * jp[p]);
+                // SAFETY: blocks scattered together never share a node (see `schedule`).
+                s.for_each(layout.h, |o, w, _| unsafe {
+                    out.update(origin + layout.offset(&o), |g| {
+                        g.0 += w * m;
+                        g.1 += w * mj;
+                    })
+                });
+            }
+        });
+    }
+    let grid = &*grid;
+    jp.par_iter_mut().enumerate().with_min_len(schedule.min_len(MIN_TASK)).for_each(|(p, j)| {
+        if smooths(p) {
+            let (s, origin) = stencil(layout, &x[p], inv_h);
+            let mut sum = 0.0;
+            // Every node of the stencil has mass: the particle itself put w > 0 there.
+            s.for_each(layout.h, |o, w, _| {
+                let (m, mj) = grid[origin + layout.offset(&o)];
+                sum += w * mj / m;
+            });
+            *j = sum;
         }
     });
 }
@@ -144,10 +197,15 @@ pub struct GridDensity<'a> {
     pub wall_fraction: Option<&'a [Real]>,
 }
 
-/// Particle→grid transfer of mass and momentum with the stress term:
-/// `m_i += φ m_p`, `(mv)_i += φ m_p (v_p + C_p (x_i − x_p)) − dt V_p σ_p g` (eq. (6)),
-/// and, on an augmented grid, the B-spline mass `Σ w m_p` that [`grid_velocity`] compares
-/// against. Each particle's stress `V_p σ_p` is computed here from its material (with its grid
+/// Particle→grid transfer of mass and momentum with the stress term. On an augmented grid,
+/// for the particles whose MLS system sees a wall:
+/// - `transfer = "paper"`: `m_i += φ m_p`, `(mv)_i += φ m_p (v_p + C_p (x_i − x_p)) − dt V_p σ_p g`
+///   (eq. (6)), and the B-spline mass `Σ w m_p` that [`grid_velocity`] compares against;
+/// - `transfer = "stable"`: the same with `φ` replaced by the normalised B-spline weight `ŵ = w / Σw`
+///   (Σ over the particle's grid points): every mass is positive, mass is conserved, and P2G is
+///   the transpose of the G2P fit, so a round trip cannot add kinetic energy.
+///
+/// The force weight `g` comes from the particle's MLS inverse in both. Each particle's stress `V_p σ_p` is computed here from its material (with its grid
 /// density, written to `density`, when `grid_density` is given). `grid` must be zero on the
 /// schedule's active blocks and on the boundary points.
 ///
@@ -178,9 +236,6 @@ pub fn p2g<const D: usize>(
             let (s, origin) = stencil(layout, &x, inv_h);
             reach.check(&s.base);
             let rho = grid_density.map_or(0.0, |g| density_at(layout, &s, origin, g.grid_mass, g.wall_fraction));
-            // SAFETY (every `update` below): each particle is in one block, and blocks scattered
-            // together never share a grid point (see `schedule`).
-            unsafe { density_out.update(p, |d| *d = rho) };
             let point = MaterialPoint {
                 f: particles.f[p],
                 jp: particles.jp[p],
@@ -189,7 +244,11 @@ pub fn p2g<const D: usize>(
                 vol0: particles.vol0[p],
                 density: rho,
             };
-            let stress = materials[particles.material[p] as usize].volume_stress(&point);
+            let material = &materials[particles.material[p] as usize];
+            // SAFETY (every `update` below): each particle is in one block, and blocks scattered
+            // together never share a grid point (see `schedule`).
+            unsafe { density_out.update(p, |d| *d = material.current_density(&point)) };
+            let stress = material.volume_stress(&point);
             let (mp, vp, cp) = (particles.mass[p], particles.v[p], particles.c[p]);
             match t.augmented.and_then(|(g, table)| table.entry(p).map(|e| (g, e))) {
                 None => {
@@ -210,24 +269,38 @@ pub fn p2g<const D: usize>(
                         }
                     });
                 }
-                Some((g, (minv, near))) => {
+                Some((g, (minv, near, total))) => {
                     let force = stress * dt;
-                    g.for_each_near(layout, &x, near, |i, w, d| {
-                        let (phi, grad) = minv.shape(w, &d);
-                        unsafe {
-                            mass.update(i, |m| *m += phi * mp);
-                            spline.update(i, |m| *m += w * mp);
-                            momentum.update(i, |m| *m += (vp + cp * d) * (phi * mp) - force * grad);
+                    match g.transfer {
+                        AugmentedTransfer::Paper => g.for_each_near(layout, &x, near, |i, w, d| {
+                            let (phi, grad) = minv.shape(w, &d);
+                            unsafe {
+                                mass.update(i, |m| *m += phi * mp);
+                                spline.update(i, |m| *m += w * mp);
+                                momentum.update(i, |m| *m += (vp + cp * d) * (phi * mp) - force * grad);
+                            }
+                        }),
+                        AugmentedTransfer::Stable => {
+                            let share = mp / total;
+                            g.for_each_near(layout, &x, near, |i, w, d| {
+                                let (_, grad) = minv.shape(w, &d);
+                                let m_i = w * share;
+                                unsafe {
+                                    mass.update(i, |m| *m += m_i);
+                                    spline.update(i, |m| *m += m_i);
+                                    momentum.update(i, |m| *m += (vp + cp * d) * m_i - force * grad);
+                                }
+                            })
                         }
-                    });
+                    }
                 }
             }
         }
     });
 }
 
-/// A node whose MLS mass `Σ φ m_p` is below this fraction of its B-spline mass `Σ w m_p`
-/// divides its momentum by that fraction of the B-spline mass instead. Near walls φ = w(α + β·d)
+/// With `transfer = "paper"`, a node whose MLS mass `Σ φ m_p` is below this fraction of its
+/// B-spline mass `Σ w m_p` divides its momentum by that fraction of the B-spline mass instead. Near walls φ = w(α + β·d)
 /// can vanish or turn negative while the force weight g = w(β + Γd) does not, so a node could get
 /// a finite force on a vanishing mass; with the floor its acceleration stays within 1/fraction of
 /// what the B-spline weights would give (on the regular grid φ = w and nothing changes).
@@ -256,7 +329,9 @@ pub fn grid_velocity<const D: usize>(
     dt: Real,
 ) -> usize {
     let dv = gravity * dt;
-    let track_spline = t.augmented.is_some();
+    // The stable transfer's masses are positive sums (mass and "spline" mass are the same):
+    // no floor acts, and none is counted.
+    let track_spline = t.augmented.is_some_and(|(g, _)| g.transfer == AugmentedTransfer::Paper);
     let nodes = t.layout.num_nodes();
     let GridState { mass, spline_mass, momentum } = grid;
     let spline_of = |i: usize| if track_spline { spline_mass[i] } else { mass[i] };
@@ -327,8 +402,9 @@ impl G2pSum {
     }
 }
 
-/// Grid→particle transfer `v_p = Σ φ v_i`, `C_p = Σ v_i gᵀ` (eq. (4)), then, per particle, the
-/// hold of particles past a wall ([`hold_at_wall`], augmented grid only), advection
+/// Grid→particle transfer `v_p = Σ φ v_i`, `C_p = Σ v_i gᵀ` (eq. (4)), then, per particle near
+/// a wall of an augmented grid, the fit to the wall value ([`crate::wall_fit`], `transfer =
+/// "stable"`) or the hold of particles past a wall ([`hold_at_wall`], `"paper"`), advection
 /// `x += dt v`, and the deformation update of its material.
 pub fn g2p<const D: usize>(
     t: &Transfer<'_, D>,
@@ -369,14 +445,22 @@ where
                     });
                     cn *= apic;
                 }
-                Some((g, (minv, near))) => {
+                Some((g, (minv, near, _))) => {
                     g.for_each_near(layout, xp, near, |i, w, d| {
                         let vi = velocity[i];
                         let (phi, grad) = minv.shape(w, &d);
                         vn += vi * phi;
                         cn += vi * grad.transpose();
                     });
-                    held = !g.surely_inside(layout, xp) && hold_at_wall(region, xp, &mut vn);
+                    match g.transfer {
+                        AugmentedTransfer::Paper => {
+                            held = !g.surely_inside(layout, xp) && hold_at_wall(region, xp, &mut vn);
+                        }
+                        AugmentedTransfer::Stable => {
+                            let feet = region.wall_feet(xp, WALL_REACH * h);
+                            crate::wall_fit::fit_to_walls(minv, h, xp, &feet, &g.walls, &mut vn, &mut cn);
+                        }
+                    }
                 }
             }
             *vp = vn;
@@ -406,6 +490,9 @@ where
         fastest: sum.fastest,
     }
 }
+
+/// Distance (cell widths) within which a wall face enters a particle's fit: the B-spline support.
+pub const WALL_REACH: Real = 1.5;
 
 /// A particle that has crossed a wall (its MLS fit then extrapolates, and left alone it can run
 /// away) loses the part of its velocity that would carry it deeper, `v −= n·max(v·n, 0)`, whatever
@@ -462,6 +549,7 @@ mod tests {
             gamma: 1.0,
             viscosity: 0.0,
             min_pressure: 0.0,
+            density_estimate: crate::material::DensityEstimate::Grid,
         })]
     }
 

@@ -5,9 +5,23 @@ use super::{non_negative, positive, ConstitutiveModel, MaterialPoint};
 use crate::math::{Matrix, Real};
 use serde::{Deserialize, Serialize};
 
+/// Where a fluid particle's density comes from (`density_estimate` in scene files).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DensityEstimate {
+    /// From the particle's own volume change: ρ = ρ0 / J with J̇ = J tr(∇v), J kept in the
+    /// particle's `jp` (Hu et al. 2018's fluid) and smoothed over the grid each step (J-bar,
+    /// [`crate::transfer::smooth_volume_ratio`]). Smooth, so a column at rest is not rectified by
+    /// the p ≥ 0 clamp, and unbiased next to walls and free surfaces.
+    #[default]
+    Deformation,
+    /// Gathered from the particle masses scattered to the regular grid (the paper's choice):
+    /// ρ_p = Σ w_ip m_i / h^D.
+    Grid,
+}
+
 /// `p = k((ρ/ρ0)^γ − 1)`, clamped below at `min_pressure`, and
-/// `σ = −p I + μ(∇v + ∇vᵀ)`. The density ρ of each particle is gathered from
-/// the particle masses scattered to the regular grid.
+/// `σ = −p I + μ(∇v + ∇vᵀ)`; ρ as `density_estimate` says.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct WeaklyCompressibleFluid {
@@ -24,6 +38,9 @@ pub struct WeaklyCompressibleFluid {
     /// Lowest pressure (Pa); a small negative value allows mild tension.
     #[serde(default)]
     pub min_pressure: Real,
+    /// Where the density comes from.
+    #[serde(default)]
+    pub density_estimate: DensityEstimate,
 }
 
 fn default_gamma() -> Real {
@@ -62,21 +79,40 @@ impl WeaklyCompressibleFluid {
 
 impl<const D: usize> ConstitutiveModel<D> for WeaklyCompressibleFluid {
     fn volume_stress(&self, p: &MaterialPoint<D>) -> Matrix<D> {
+        let density = ConstitutiveModel::<D>::current_density(self, p);
         // The grid estimate of ρ falls far below ρ0 only where neighbours are missing (free
         // surface, spray): in the bulk the pressure clamp keeps ρ within ~0.1% of ρ0. Taking
         // V = m/ρ there would inflate an isolated particle's volume ~10×, and with it the
         // explicit viscous coefficient μV/(m h²), which then blows up. So V ≤ m/ρ0; the
         // pressure still sees the estimated ρ.
-        let volume = p.mass / p.density.max(self.density);
-        self.cauchy_stress(p.density, &p.grad_v) * volume
+        let floor = match self.density_estimate {
+            DensityEstimate::Grid => self.density,
+            DensityEstimate::Deformation => 0.5 * self.density,
+        };
+        let volume = p.mass / density.max(floor);
+        self.cauchy_stress(density, &p.grad_v) * volume
     }
 
-    fn update_deformation(&self, _f: &mut Matrix<D>, _jp: &mut Real, _grad_v: &Matrix<D>, _dt: Real) {
-        // The fluid's state is its grid density; F is not needed.
+    fn update_deformation(&self, _f: &mut Matrix<D>, jp: &mut Real, grad_v: &Matrix<D>, dt: Real) {
+        // F is not needed; with the deformation estimate `jp` holds J, J̇ = J tr(∇v).
+        if self.density_estimate == DensityEstimate::Deformation {
+            *jp *= 1.0 + dt * grad_v.trace();
+        }
     }
 
     fn needs_grid_density(&self) -> bool {
-        true
+        self.density_estimate == DensityEstimate::Grid
+    }
+
+    fn smooths_volume_ratio(&self) -> bool {
+        self.density_estimate == DensityEstimate::Deformation
+    }
+
+    fn current_density(&self, p: &MaterialPoint<D>) -> Real {
+        match self.density_estimate {
+            DensityEstimate::Deformation => self.density / p.jp,
+            DensityEstimate::Grid => p.density,
+        }
     }
 
     fn density(&self) -> Real {
@@ -98,7 +134,14 @@ mod tests {
     use nalgebra::Matrix2;
 
     fn water() -> WeaklyCompressibleFluid {
-        WeaklyCompressibleFluid { density: 1000.0, stiffness: 1e5, gamma: 4.0, viscosity: 2.0, min_pressure: -100.0 }
+        WeaklyCompressibleFluid {
+            density: 1000.0,
+            stiffness: 1e5,
+            gamma: 4.0,
+            viscosity: 2.0,
+            min_pressure: -100.0,
+            density_estimate: DensityEstimate::Grid,
+        }
     }
 
     /// A uniaxial stretching flow ∂u/∂x = s at rest density gives σ_xx = 2μs, σ_yy = 0 (no pressure).
@@ -140,5 +183,27 @@ mod tests {
         let expect_shear = 2.0 / 1000.0 * f.viscosity * 1.0;
         assert!((vs[(0, 1)] - expect_shear).abs() < 1e-12);
         assert!((vs[(0, 0)] + f.min_pressure * 2.0 / 1000.0).abs() < 1e-12);
+    }
+
+    /// With the deformation estimate, a particle compressed by a uniform flow ∇v = −s I over n
+    /// steps has J = (1 − 2 s dt)ⁿ in 2D (J̇ = J tr ∇v, forward Euler) and reads ρ = ρ0 / J; the
+    /// grid density it is handed is ignored.
+    #[test]
+    fn deformation_density_follows_the_volume_change() {
+        let f = WeaklyCompressibleFluid { density_estimate: DensityEstimate::Deformation, ..water() };
+        assert!(!ConstitutiveModel::<2>::needs_grid_density(&f));
+        let (s, dt, n) = (2.0, 1e-3, 10);
+        let grad_v = Matrix2::identity() * -s;
+        let (mut fm, mut jp) = (Matrix2::identity(), 1.0);
+        for _ in 0..n {
+            f.update_deformation(&mut fm, &mut jp, &grad_v, dt);
+        }
+        let expect = (1.0 - 2.0 * s * dt).powi(n);
+        assert!((jp - expect).abs() < 1e-15, "{jp} vs {expect}");
+        let p = MaterialPoint::<2> { f: fm, jp, grad_v: Matrix2::zeros(), mass: 2.0, vol0: 0.0, density: 1.0 };
+        assert!((ConstitutiveModel::<2>::current_density(&f, &p) - 1000.0 / expect).abs() < 1e-9);
+        let vs = f.volume_stress(&p);
+        let rho = 1000.0 / expect;
+        assert!((vs[(0, 0)] + f.pressure(rho) * 2.0 / rho).abs() < 1e-9);
     }
 }

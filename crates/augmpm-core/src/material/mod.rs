@@ -8,7 +8,7 @@ mod snow_stomakhin2013;
 mod stvk;
 
 pub use fixed_corotated::FixedCorotated;
-pub use fluid_weakly_compressible::WeaklyCompressibleFluid;
+pub use fluid_weakly_compressible::{DensityEstimate, WeaklyCompressibleFluid};
 pub use snow_stomakhin2013::SnowStomakhin2013;
 pub use stvk::StVenantKirchhoff;
 
@@ -51,6 +51,18 @@ pub trait ConstitutiveModel<const D: usize> {
     /// Whether [`MaterialPoint::density`] must be estimated on the grid before the stress.
     fn needs_grid_density(&self) -> bool {
         false
+    }
+
+    /// Whether the model keeps its density in `jp` = J, smoothed over the grid each step
+    /// ([`crate::transfer::smooth_volume_ratio`]).
+    fn smooths_volume_ratio(&self) -> bool {
+        false
+    }
+
+    /// The density (kg/m³, or kg/m² in 2D) the model's stress sees at this point: the grid
+    /// estimate it is handed, unless the model keeps its own.
+    fn current_density(&self, p: &MaterialPoint<D>) -> Real {
+        p.density
     }
 
     /// Rest density (kg/m³, or kg/m² in 2D).
@@ -144,6 +156,13 @@ where
     }
     fn needs_grid_density(&self) -> bool {
         dispatch!(self, m => ConstitutiveModel::<D>::needs_grid_density(m))
+    }
+    #[inline]
+    fn current_density(&self, p: &MaterialPoint<D>) -> Real {
+        dispatch!(self, m => ConstitutiveModel::<D>::current_density(m, p))
+    }
+    fn smooths_volume_ratio(&self) -> bool {
+        dispatch!(self, m => ConstitutiveModel::<D>::smooths_volume_ratio(m))
     }
     fn density(&self) -> Real {
         dispatch!(self, m => ConstitutiveModel::<D>::density(m))

@@ -1,0 +1,155 @@
+//! The grid→particle fit of the stable augmented transfer: a particle's affine velocity
+//! `u(x) = v + C (x − x_p)` is the weighted least-squares fit of eq. (3)–(4) of Toyota & Umetani
+//! 2024 to its grid points, plus, for each wall face within reach, the wall's condition at the
+//! particle's foot on that face, weighted like (h/r)² as the distance r to the face vanishes
+//! (the interpolating MLS of Schaefer et al. 2006 in spirit). The fit then meets the wall value
+//! at the wall, so the normal velocity of a particle at distance r from a still wall is O(r) and
+//! an explicit step cannot carry it through (derivation: `docs/stable_transfer.md`).
+//!
+//! The wall terms carry no mass and only penalise the fit, so they can only lower the fit's
+//! weighted norm (`Σ w |u(x_i)|²` over the grid points) below that of the grid data when their
+//! targets are zero: the transfer stays energy-stable.
+
+use crate::boundary::WallCondition;
+use crate::geometry::{WallFeet, MAX_FEET};
+use crate::kernel::{bspline, MlsInverse};
+use crate::math::{Matrix, Real, Vector};
+
+/// Most wall terms of one particle: every foot, each with up to three rows (sticky in 3D).
+const MAX_ROWS: usize = MAX_FEET * 3;
+
+/// The inverse `r² / N(r)` of a wall term's weight `ω = N(r) / r²` at distance `r` (cell widths)
+/// from its face: the quadratic B-spline over the squared distance. Zero on the face, where the fit
+/// meets the wall value exactly; infinite beyond the support (r ≥ 1.5), where the term is dropped.
+/// Kept as its inverse so that no weight overflows as r → 0.
+#[inline]
+pub fn inverse_wall_weight(r: Real) -> Real {
+    let n = bspline(r);
+    if n > 0.0 {
+        r * r / n
+    } else {
+        Real::INFINITY
+    }
+}
+
+/// One scalar wall condition on the fit: `n · u(x_p + d) = target`, with weight `1 / inv_weight`.
+#[derive(Clone, Copy, Debug)]
+struct Row<const D: usize> {
+    n: Vector<D>,
+    d: Vector<D>,
+    /// `M⁻¹ [1, d]`: its first entry and the rest (the shape function of the foot, eq. (4)).
+    q0: Real,
+    q: Vector<D>,
+    /// `1 / ω`.
+    inv_weight: Real,
+    /// `target − n · u₀(x_p + d)`, the residual of the fit without wall terms.
+    residual: Real,
+}
+
+/// Corrects the grid fit `(v, c)` of a particle at `x` (its MLS inverse `minv` over the grid
+/// points, eq. (5)) by the wall terms of `feet` under each wall's condition in `conditions`:
+/// sticky asks for the wall's tangential velocity (every component), slip for no normal velocity,
+/// separate for no normal velocity only where the fit moves into the wall. Returns how many
+/// scalar conditions acted.
+///
+/// The corrected fit minimises `Σ_i w_i |v_i − u(x_i)|² + Σ_j ω_j (n_j·u(x_j) − g_j)²`. With
+/// `A = I ⊗ M` the grid part and `U` the wall rows, Woodbury gives the correction
+/// `A⁻¹ U λ` with `(Ω⁻¹ + Uᵀ A⁻¹ U) λ = g − Uᵀ x₀`: a small system per particle whose matrix stays
+/// well scaled however large the weights grow (`Ω⁻¹ → 0`).
+pub fn fit_to_walls<const D: usize>(
+    minv: &MlsInverse<D>,
+    h: Real,
+    x: &Vector<D>,
+    feet: &WallFeet<D>,
+    conditions: &[WallCondition],
+    v: &mut Vector<D>,
+    c: &mut Matrix<D>,
+) -> usize {
+    let zero = Vector::<D>::zeros();
+    let mut rows = [Row { n: zero, d: zero, q0: 0.0, q: zero, inv_weight: 1.0, residual: 0.0 }; MAX_ROWS];
+    let mut len = 0;
+    for foot in feet.iter() {
+        let d = foot.x - x;
+        let inv_weight = inverse_wall_weight(d.norm() / h);
+        if !inv_weight.is_finite() {
+            continue;
+        }
+        let (q0, q) = minv.shape(1.0, &d);
+        let fitted = *v + *c * d;
+        let n = foot.normal;
+        let mut row = |n: Vector<D>, target: Real| {
+            if len < MAX_ROWS {
+                rows[len] = Row { n, d, q0, q, inv_weight, residual: target - n.dot(&fitted) };
+                len += 1;
+            }
+        };
+        match conditions[foot.wall] {
+            WallCondition::Sticky => {
+                // The wall's geometry is still: only its tangential surface velocity counts.
+                let wall = foot.velocity - n * n.dot(&foot.velocity);
+                for k in 0..D {
+                    let mut axis = Vector::<D>::zeros();
+                    axis[k] = 1.0;
+                    row(axis, wall[k]);
+                }
+            }
+            WallCondition::Slip => row(n, 0.0),
+            WallCondition::Separate => {
+                if n.dot(&fitted) > 0.0 {
+                    row(n, 0.0)
+                }
+            }
+        }
+    }
+    apply_rows(&rows[..len], v, c);
+    len
+}
+
+/// `x` in double precision, whatever [`Real`] is.
+#[allow(clippy::unnecessary_cast, clippy::useless_conversion)]
+#[inline]
+fn wide(x: Real) -> f64 {
+    x as f64
+}
+
+/// Solves `(Ω⁻¹ + Uᵀ A⁻¹ U) λ = residual` in f64 (at most [`MAX_ROWS`] unknowns, Gaussian
+/// elimination with partial pivoting) and adds `Σ_j λ_j n_j [q0_j, q_jᵀ]` to the fit.
+fn apply_rows<const D: usize>(rows: &[Row<D>], v: &mut Vector<D>, c: &mut Matrix<D>) {
+    let m = rows.len();
+    if m == 0 {
+        return;
+    }
+    let mut k = [[0.0f64; MAX_ROWS + 1]; MAX_ROWS];
+    for (j, a) in rows.iter().enumerate() {
+        for (l, b) in rows.iter().enumerate() {
+            // P_jᵀ M⁻¹ P_l = q0_l + d_j · q_l.
+            k[j][l] = wide(a.n.dot(&b.n)) * wide(b.q0 + a.d.dot(&b.q));
+        }
+        k[j][j] += wide(a.inv_weight);
+        k[j][m] = wide(a.residual);
+    }
+    for col in 0..m {
+        let pivot = (col..m).max_by(|&a, &b| k[a][col].abs().total_cmp(&k[b][col].abs())).unwrap_or(col);
+        k.swap(col, pivot);
+        let p = k[col][col];
+        if p.abs() < 1e-300 {
+            return;
+        }
+        for row in col + 1..m {
+            let f = k[row][col] / p;
+            for l in col..=m {
+                k[row][l] -= f * k[col][l];
+            }
+        }
+    }
+    let mut lambda = [0.0f64; MAX_ROWS];
+    for j in (0..m).rev() {
+        let s: f64 = (j + 1..m).map(|l| k[j][l] * lambda[l]).sum();
+        lambda[j] = (k[j][m] - s) / k[j][j];
+    }
+    for (row, &l) in rows.iter().zip(&lambda) {
+        let l = l as Real;
+        *v += row.n * (l * row.q0);
+        *c += row.n * (row.q * l).transpose();
+    }
+}
