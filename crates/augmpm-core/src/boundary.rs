@@ -38,9 +38,10 @@ impl WallCondition {
     #[inline]
     pub fn apply_at<const D: usize>(self, v: Vector<D>, normals: &[Vector<D>; 2], wall_v: &Vector<D>) -> Vector<D> {
         let [n0, n1] = normals;
-        // Orthonormal basis {e0, e1} of span{n0, n1}.
+        // Orthonormal basis {e0, e1} of span{n0, n1}. Two equal normals (no corner) leave a
+        // residue of the rounding (~1e-7 in f32): only a residue above √ε is a second direction.
         let r = n1 - n0 * n1.dot(n0);
-        let e1 = (r.norm() > 1e-9).then(|| r.normalize());
+        let e1 = (r.norm() > Real::EPSILON.sqrt()).then(|| r.normalize());
         let tangential = |u: Vector<D>| {
             let u = u - n0 * u.dot(n0);
             e1.map_or(u, |e1| u - e1 * u.dot(&e1))
@@ -56,11 +57,12 @@ impl WallCondition {
                     rel
                 } else {
                     // Candidates: the projection on either face, and the edge (always feasible).
+                    let tolerance = (1e-12 as Real).max(16.0 * Real::EPSILON) * rel.norm();
                     let faces = [rel - n0 * rel.dot(n0), rel - n1 * rel.dot(n1)];
                     let edge = tangential(rel);
                     faces
                         .into_iter()
-                        .filter(|u| u.dot(n0) <= 1e-12 * rel.norm() && u.dot(n1) <= 1e-12 * rel.norm())
+                        .filter(|u| u.dot(n0) <= tolerance && u.dot(n1) <= tolerance)
                         .fold(edge, |best, u| if (u - rel).norm() < (best - rel).norm() { u } else { best })
                 }
             }

@@ -137,7 +137,9 @@ impl Polygon {
         let inside = self.contains(p);
         // Away from the wall, the direction to the nearest point is the true normal
         // (also at corners); on the wall itself fall back to the edge normal.
-        let normal = if d > 1e-12 {
+        // (On the wall up to rounding: ~1e-7 m in f32 for coordinates of order 1 m.)
+        let on_wall = (1e-12 as Real).max(16.0 * Real::EPSILON * (p.amax() + 1.0));
+        let normal = if d > on_wall {
             let n = (p - q) / d;
             if inside {
                 -n
@@ -349,7 +351,10 @@ impl Walls2 {
                 }
             }
         }
-        let tolerance = 1e-9 * h;
+        // A sampled point lies on its wall up to the rounding of its coordinates: in f32 that is
+        // ~1e-7 of the domain size, far above 1e-9 h (which dropped half the points in f32).
+        let extent = self.domain_box.vertices[2];
+        let tolerance = (1e-9 * h).max(16.0 * Real::EPSILON * extent.x.max(extent.y));
         out.retain(|p| self.distance(&p.x).distance.abs() <= tolerance);
         out
     }

@@ -132,14 +132,7 @@ impl PySimulation {
                 }
                 let method =
                     if method == "naive" { augmpm_core_f32::Method::Naive } else { augmpm_core_f32::Method::Augmented };
-                let (sim, mut warnings) = scene.build(method).map_err(bad32)?;
-                if method == augmpm_core_f32::Method::Augmented {
-                    warnings.push(
-                        "precision f32 with the augmented method is not yet robust: the benchmark dam break stops \
-                         unstable after 220-300 steps (f64 runs it through); prefer f64"
-                            .to_string(),
-                    );
-                }
+                let (sim, warnings) = scene.build(method).map_err(bad32)?;
                 (Engine::F32(sim), warnings)
             }
             _ => {
