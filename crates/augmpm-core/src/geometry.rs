@@ -31,6 +31,9 @@ pub struct WallFoot<const D: usize> {
     pub wall: usize,
     /// Velocity of the wall surface there (m/s); only its tangential part acts.
     pub velocity: Vector<D>,
+    /// 1/radius (1/m) of a face that curves around the material (a circular container); 0 for a
+    /// straight face and for one that curves away from the material (an obstacle).
+    pub curvature: Real,
 }
 
 /// Most wall faces a particle takes into account at once (a corner has two; a narrow gap more).
@@ -398,10 +401,10 @@ impl Region<2> for Walls2 {
         // A face point counts only where it bounds the material region (a polygon edge inside
         // another polygon, or the domain box beyond a container, does not).
         let tolerance = Real::EPSILON.sqrt() * reach;
-        let mut add = |q: Point, normal: Point, wall: usize| {
+        let mut add = |q: Point, normal: Point, wall: usize, curvature: Real| {
             if self.distance(&q).distance.abs() <= tolerance {
                 let velocity = self.surface_velocity(wall, &q, &normal);
-                feet.push(WallFoot { x: q, normal, wall, velocity }, tolerance);
+                feet.push(WallFoot { x: q, normal, wall, velocity, curvature }, tolerance);
             }
         };
         let polygons = self
@@ -427,7 +430,7 @@ impl Region<2> for Walls2 {
                 if t > 0.0 && t < 1.0 {
                     let q = a + e * t;
                     if (x - q).norm() < reach {
-                        add(q, Point::new(e.y, -e.x).normalize(), wall);
+                        add(q, Point::new(e.y, -e.x).normalize(), wall, 0.0);
                     }
                 }
                 // A reflex corner at a (the polygon turns clockwise there): x past the end of the
@@ -435,7 +438,7 @@ impl Region<2> for Walls2 {
                 let before = a - poly.vertices[(k + n - 1) % n];
                 let d = (a - x).norm();
                 if before.perp(&e) < 0.0 && t <= 0.0 && along((k + n - 1) % n) >= 1.0 && d > 0.0 && d < reach {
-                    add(a, (a - x) / d, wall);
+                    add(a, (a - x) / d, wall, 0.0);
                 }
             }
         }
@@ -445,8 +448,9 @@ impl Region<2> for Walls2 {
                 let norm = r.norm();
                 if norm > 0.0 && (norm - c.radius).abs() < reach {
                     let radial = r / norm;
-                    let normal = if *side == Side::Outside { -radial } else { radial };
-                    add(c.center + radial * c.radius, normal, wall);
+                    let (normal, curvature) =
+                        if *side == Side::Outside { (-radial, 0.0) } else { (radial, 1.0 / c.radius) };
+                    add(c.center + radial * c.radius, normal, wall, curvature);
                 }
             }
         }

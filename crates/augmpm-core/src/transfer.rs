@@ -458,7 +458,7 @@ where
                         }
                         AugmentedTransfer::Stable => {
                             let feet = region.wall_feet(xp, WALL_REACH * h);
-                            crate::wall_fit::fit_to_walls(minv, h, xp, &feet, &g.walls, &mut vn, &mut cn);
+                            crate::wall_fit::fit_to_walls(minv, xp, &feet, &g.walls, (h, dt), &mut vn, &mut cn);
                         }
                     }
                 }

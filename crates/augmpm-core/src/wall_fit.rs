@@ -47,10 +47,16 @@ struct Row<const D: usize> {
 }
 
 /// Corrects the grid fit `(v, c)` of a particle at `x` (its MLS inverse `minv` over the grid
-/// points, eq. (5)) by the wall terms of `feet` under each wall's condition in `conditions`:
+/// points, eq. (5); `h` the cell width (m), `dt` the step (s)) by the wall terms of `feet` under each wall's condition in `conditions`:
 /// sticky asks for the wall's tangential velocity (every component), slip for no normal velocity,
 /// separate for no normal velocity only where the fit moves into the wall. Returns how many
 /// scalar conditions acted.
+///
+/// On a face that curves around the material (a circular container), a particle that moves along
+/// it in a straight step of `dt` (s) would end `√(ρ² + |v_t dt|²) − ρ` farther out (ρ its distance
+/// from the centre): the normal target is inward by `(ρ − √(ρ² − |v_t dt|²)) / dt`, so that
+/// explicit advection keeps the particle's distance to the centre (a correction of order dt,
+/// zero on straight faces).
 ///
 /// The corrected fit minimises `Σ_i w_i |v_i − u(x_i)|² + Σ_j ω_j (n_j·u(x_j) − g_j)²`. With
 /// `A = I ⊗ M` the grid part and `U` the wall rows, Woodbury gives the correction
@@ -58,10 +64,10 @@ struct Row<const D: usize> {
 /// well scaled however large the weights grow (`Ω⁻¹ → 0`).
 pub fn fit_to_walls<const D: usize>(
     minv: &MlsInverse<D>,
-    h: Real,
     x: &Vector<D>,
     feet: &WallFeet<D>,
     conditions: &[WallCondition],
+    (h, dt): (Real, Real),
     v: &mut Vector<D>,
     c: &mut Matrix<D>,
 ) -> usize {
@@ -77,6 +83,14 @@ pub fn fit_to_walls<const D: usize>(
         let (q0, q) = minv.shape(1.0, &d);
         let fitted = *v + *c * d;
         let n = foot.normal;
+        let inward = if foot.curvature > 0.0 && dt > 0.0 {
+            let rho = 1.0 / foot.curvature - d.norm();
+            let step = (*v - n * n.dot(v)).norm() * dt;
+            // Inward by δ with (ρ − δ)² + step² = ρ²: the step's chord ends at ρ again.
+            (rho - (rho * rho - step * step).max(0.0).sqrt()) / dt
+        } else {
+            0.0
+        };
         let mut row = |n: Vector<D>, target: Real| {
             if len < MAX_ROWS {
                 rows[len] = Row { n, d, q0, q, inv_weight, residual: target - n.dot(&fitted) };
@@ -86,17 +100,17 @@ pub fn fit_to_walls<const D: usize>(
         match conditions[foot.wall] {
             WallCondition::Sticky => {
                 // The wall's geometry is still: only its tangential surface velocity counts.
-                let wall = foot.velocity - n * n.dot(&foot.velocity);
+                let wall = foot.velocity - n * (n.dot(&foot.velocity) + inward);
                 for k in 0..D {
                     let mut axis = Vector::<D>::zeros();
                     axis[k] = 1.0;
                     row(axis, wall[k]);
                 }
             }
-            WallCondition::Slip => row(n, 0.0),
+            WallCondition::Slip => row(n, -inward),
             WallCondition::Separate => {
-                if n.dot(&fitted) > 0.0 {
-                    row(n, 0.0)
+                if n.dot(&fitted) > -inward {
+                    row(n, -inward)
                 }
             }
         }
@@ -151,5 +165,61 @@ fn apply_rows<const D: usize>(rows: &[Row<D>], v: &mut Vector<D>, c: &mut Matrix
         let l = l as Real;
         *v += row.n * (l * row.q0);
         *c += row.n * (row.q * l).transpose();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::WallFoot;
+    use nalgebra::{Matrix2, Vector2};
+
+    fn foot(x: Vector2<Real>, normal: Vector2<Real>, curvature: Real) -> WallFeet<2> {
+        let mut feet = WallFeet::default();
+        feet.push(WallFoot { x, normal, wall: 0, velocity: Vector2::zeros(), curvature }, 1e-12);
+        feet
+    }
+
+    /// The wall term's weight N(r)/r² grows without bound at the wall (its inverse is zero there)
+    /// and vanishes beyond the B-spline support.
+    #[test]
+    fn wall_weight_is_infinite_on_the_wall_and_zero_beyond_reach() {
+        assert_eq!(inverse_wall_weight(0.0), 0.0);
+        assert!((inverse_wall_weight(0.5) - 0.25 / 0.5).abs() < 1e-15);
+        assert_eq!(inverse_wall_weight(1.5), Real::INFINITY);
+    }
+
+    /// A particle on a slip wall keeps its tangential velocity and loses its normal one exactly;
+    /// on a sticky wall it takes the wall's (still) velocity.
+    #[test]
+    fn a_particle_on_the_wall_meets_the_condition_exactly() {
+        let h = 0.1;
+        let minv = MlsInverse::<2>::regular(h);
+        let x = Vector2::new(0.5, 0.2);
+        let feet = foot(x, Vector2::new(0.0, -1.0), 0.0);
+        for (condition, expect) in
+            [(WallCondition::Slip, Vector2::new(0.3, 0.0)), (WallCondition::Sticky, Vector2::zeros())]
+        {
+            let (mut v, mut c) = (Vector2::new(0.3, -0.7), Matrix2::new(1.0, 2.0, 3.0, 4.0));
+            fit_to_walls(&minv, &x, &feet, &[condition], (h, 1e-3), &mut v, &mut c);
+            assert!((v - expect).norm() < 1e-12, "{condition:?}: {v}");
+        }
+    }
+
+    /// Inside a circular container of radius R, a particle on the slip wall moving along it at
+    /// speed U gets the inward normal velocity that keeps it on the wall over a straight step:
+    /// |x + dt v − c| = R (to rounding), where without the correction it would end U²dt²/2R out.
+    #[test]
+    fn curved_walls_keep_the_particle_s_distance_over_a_step() {
+        let (h, dt, radius, u) = (0.02, 2e-3, 0.3, 1.5);
+        let minv = MlsInverse::<2>::regular(h);
+        let centre = Vector2::new(0.5, 0.5);
+        let x = centre + Vector2::new(radius, 0.0);
+        let feet = foot(centre + Vector2::new(radius, 0.0), Vector2::new(1.0, 0.0), 1.0 / radius);
+        let (mut v, mut c) = (Vector2::new(0.0, u), Matrix2::zeros());
+        fit_to_walls(&minv, &x, &feet, &[WallCondition::Slip], (h, dt), &mut v, &mut c);
+        let moved = (x + v * dt - centre).norm();
+        assert!((moved - (x - centre).norm()).abs() < 1e-12, "{moved}");
+        assert!((v.y - u).abs() < 1e-12 && v.x < 0.0);
     }
 }

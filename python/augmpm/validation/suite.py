@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from augmpm.files import save_png, write_text
-from augmpm.validation import channel, dam_break, hydrostatic, incline, interpolation
+from augmpm.validation import channel, dam_break, hydrostatic, incline, interpolation, rotation
 from augmpm.validation.records import Record
 
 ANGLES = [0.0, 15.0, 30.0, 45.0]
@@ -121,15 +121,28 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
     hyd = stage("hydrostatic column", lambda: hydrostatic.run(quick, angles))
 
     def draw_hyd(ax):
-        for (method, angle, corrected), (y, p, y_s) in hyd.items():
+        markers = {"hydrostatic": "o", "hydrostatic_grid_density": "x", "hydrostatic_density_corrected": "+"}
+        for (method, angle, case), (y, p, y_s) in hyd.items():
             if angle == 30.0:
-                ax.plot(y_s - y, p, "o" if corrected else "x", ms=3, color=COLOURS[method],
-                        label=f"{method} 30°{', density corrected' if corrected else ''}")  # fmt: skip
+                ax.plot(y_s - y, p, markers[case], ms=3, color=COLOURS[method],
+                        label=f"{method} 30°, {case.removeprefix('hydrostatic').strip('_') or 'default'}")  # fmt: skip
         depth = np.linspace(0, hydrostatic.DEPTH, 10)
         ax.plot(depth, hydrostatic.RHO * hydrostatic.G * depth, "k-", label="ρ g (H − y)")
         ax.set(xlabel="depth (m)", ylabel="pressure (Pa)", title="Hydrostatic column, walls at 30°")
 
     plots.append(("Hydrostatic pressure", _plot_simple(out, "hydrostatic.png", draw_hyd)))
+
+    rot = stage("rotation in a circular container", lambda: rotation.run(quick))
+
+    def draw_rot(ax):
+        for (case, method), (t, ratios) in rot.items():
+            ax.plot(t, ratios, "o-" if case == "rotation_fullslip" else "s--", ms=3, color=COLOURS[method],
+                    label=f"{case.removeprefix('rotation_')} {method}")  # fmt: skip
+        tt = np.linspace(0.05, max((t[-1] for (c, _), (t, _) in rot.items() if c == "rotation_noslip"), default=1), 50)
+        ax.plot(tt, [rotation.spin_down(x) for x in tt], "k-", lw=0.8, label="no-slip series")
+        ax.set(xlabel="t (s)", ylabel="L(t) / L(0)", title="Fluid in rigid rotation, circular container")
+
+    plots.append(("Rotation", _plot_simple(out, "rotation.png", draw_rot)))
 
     dam = stage("dam break", lambda: dam_break.run(quick, angles))
 
