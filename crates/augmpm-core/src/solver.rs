@@ -143,8 +143,10 @@ struct Scratch<const D: usize> {
     grid: GridState<D>,
     /// B-spline grid mass of the density estimate (fluids only; empty otherwise).
     density_mass: Vec<Real>,
-    /// Per node, mass and mass·J of the particles whose J is smoothed (empty when none is).
+    /// Per node, mass and mass·J of the particles whose J is smoothed (empty when none is), and per
+    /// material whether its particles take part.
     volume_ratio: Vec<(Real, Real)>,
+    smooths: Vec<bool>,
     density: Vec<Real>,
     /// Particles whose MLS system sees a wall, with their inverses (augmented grid only).
     walls: WallParticles<D>,
@@ -237,6 +239,7 @@ where
             } else {
                 Vec::new()
             },
+            smooths: model.materials.iter().map(ConstitutiveModel::<D>::smooths_volume_ratio).collect(),
             density: vec![0.0; n],
             walls: WallParticles::default(),
         };
@@ -440,7 +443,7 @@ where
             clock = now;
         };
 
-        let Scratch { schedule, grid, density_mass, volume_ratio, density, walls } = scratch;
+        let Scratch { schedule, grid, density_mass, volume_ratio, smooths, density, walls } = scratch;
         schedule.prepare(layout, &particles.x).map_err(left)?;
         density.resize(particles.len(), 0.0);
         let nodes = layout.num_nodes();
@@ -462,7 +465,6 @@ where
 
         if !volume_ratio.is_empty() {
             schedule.clear(layout, schedule.stale(), volume_ratio, (0.0, 0.0));
-            let smooths: Vec<bool> = model.materials.iter().map(ConstitutiveModel::<D>::smooths_volume_ratio).collect();
             let material = &particles.material;
             transfer::smooth_volume_ratio(
                 layout,

@@ -1,8 +1,8 @@
 """Cases 1–3 and 8: plane Poiseuille, plane Couette and a full-slip channel, at several angles to the grid.
 
 The channel is a long parallelogram of width H at angle θ inside the unit box. A slug of fluid, four
-widths long and free at both ends, fills its whole width; measurements use the particles within one
-width of the slug's middle, where the ends do not reach. Poiseuille is driven by a body force f along
+widths long (Couette: six) and free at both ends, fills its whole width; measurements use the particles
+within one width of the slug's middle, where the ends do not reach. Poiseuille is driven by a body force f along
 the channel, Couette by the walls running at ±U/2 (a belt loop: `tangential_speed`), and the full-slip
 channel by f with slipping walls (plug flow u = f·t).
 """
@@ -50,6 +50,10 @@ def _scene(kind: str, angle: float, cells: int) -> tuple[dict, Frame]:
     length = 4 * H
     eps = 1e-6 * H
     if kind == "couette":
+        # Centred, and six widths long: its sheared ends (each wall carries the fluid ±U/2·t along)
+        # must stay farther than the window from the middle until t = 0.8 H²/ν; with four widths
+        # they reached it and set a 0.4% error floor that hid the convergence.
+        length = 6 * H
         s0, gravity = -length / 2, [0.0, 0.0]
     else:
         s0 = -half + 2 * h
@@ -128,8 +132,16 @@ def wall_slip(kind: str, y: np.ndarray, u: np.ndarray) -> float:
     return float(max(abs(np.polyval(fit, 0.0) - walls[0]), abs(np.polyval(fit, H) - walls[1])) / U_REF)
 
 
+#: Tolerances at H/h = 32 (the full run). The quick run's H/h = 16 doubles the cell size; the steady
+#: profile and the wall slip converge at least linearly (measured: order 1.8), so its tolerances are twice
+#: these (stated in the quick report).
+PROFILE_TOLERANCE = 0.02
+SLIP_TOLERANCE = 0.01
+
+
 def run(quick: bool, angles: list[float]) -> tuple[list[Record], dict]:
     cells = 16 if quick else 32
+    coarse = 32 / cells
     records: list[Record] = []
     results: dict = {}
     for kind in ("poiseuille", "couette"):
@@ -148,8 +160,12 @@ def run(quick: bool, angles: list[float]) -> tuple[list[Record], dict]:
                 def rec(metric, value, tol, kind=case, method=method, angle=angle):
                     records.append(Record(kind, method, angle, cells, metric, value, tol))
 
-                rec("profile_rms_error_over_umax", profile_error(kind, y, u, times[-1], cells), 0.02)
-                rec("wall_slip_over_umax", wall_slip(kind, y, u), 0.01)
+                rec(
+                    "profile_rms_error_over_umax",
+                    profile_error(kind, y, u, times[-1], cells),
+                    PROFILE_TOLERANCE * coarse,
+                )
+                rec("wall_slip_over_umax", wall_slip(kind, y, u), SLIP_TOLERANCE * coarse)
                 for t, (yt, ut) in zip(times[:-1], r.profiles[:-1], strict=True):
                     rec(f"transient_rms_error_over_umax_t{t / TAU:g}tau", profile_error(kind, yt, ut, t, cells), 0.02)
                 rec("particles_outside_max", float(r.max_outside), 0.0)

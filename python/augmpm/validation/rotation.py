@@ -116,13 +116,16 @@ def run(quick: bool) -> tuple[list[Record], dict]:
                 Record(c, m, 0.0, cells, metric, value, tol)
             )
             if condition == "slip":
-                rec(f"angular_momentum_loss_after_{turns}_turns", 1 - ratios[-1], 0.01)
+                # The target: within 1% over 10 turns; the quick run's 2 turns get a fifth of it.
+                rec(f"angular_momentum_loss_after_{turns}_turns", 1 - ratios[-1], 0.01 * turns / 10)
             else:
                 error = max(abs(q - spin_down(t)) for q, t in zip(ratios, times, strict=True))
-                rec("angular_momentum_max_error_vs_series", error, SPIN_DOWN_TOLERANCE)
+                # The quick run's R/h is half the full one's; the error converges at least linearly.
+                rec("angular_momentum_max_error_vs_series", error, SPIN_DOWN_TOLERANCE * (2 if quick else 1))
             rec("particles_outside_max", float(outside), 0.0)
     return records, data
 
 
-#: L(t)/L(0) of the no-slip spin-down within 0.02 of the series at every sample.
+#: L(t)/L(0) of the no-slip spin-down within 0.02 of the series at every sample (R/h = 38; quick, R/h = 19:
+#: 0.04).
 SPIN_DOWN_TOLERANCE = 0.02
