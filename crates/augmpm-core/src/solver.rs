@@ -466,23 +466,25 @@ where
         if !volume_ratio.is_empty() {
             schedule.clear(layout, schedule.stale(), volume_ratio, (0.0, 0.0));
             let material = &particles.material;
-            transfer::smooth_volume_ratio(
+            transfer::scatter_volume_ratio(
                 layout,
                 schedule,
                 &particles.x,
                 &particles.mass,
-                &mut particles.jp,
+                &particles.jp,
                 |p| smooths[material[p] as usize],
                 volume_ratio,
             );
         }
-        let grid_density = if density_mass.is_empty() {
-            None
-        } else {
+        if !density_mass.is_empty() {
             schedule.clear(layout, schedule.stale(), density_mass, 0.0);
             transfer::scatter_mass(layout, schedule, &particles.x, &particles.mass, density_mass);
-            Some(GridDensity { grid_mass: density_mass, wall_fraction: model.wall_fraction.as_deref() })
-        };
+        }
+        let grid_density = (!density_mass.is_empty() || !volume_ratio.is_empty()).then(|| GridDensity {
+            grid_mass: density_mass,
+            wall_fraction: model.wall_fraction.as_deref(),
+            volume_ratio,
+        });
         lap(&mut times.density);
 
         let augmented = match &model.boundary {
@@ -506,7 +508,10 @@ where
         }
         lap(&mut times.grid);
 
-        let outcome = transfer::g2p(&t, model.region.as_ref(), &model.materials, &grid.momentum, particles, dt);
+        // Only materials that smooth their J read it back from the density.
+        let smoothed: &[Real] = if volume_ratio.is_empty() { &[] } else { density };
+        let outcome =
+            transfer::g2p(&t, model.region.as_ref(), &model.materials, &grid.momentum, smoothed, particles, dt);
         let cells = outcome.max_move / layout.h;
         schedule.moved(cells);
         lap(&mut times.g2p);

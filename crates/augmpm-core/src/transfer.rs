@@ -43,57 +43,65 @@ pub fn scatter_mass<const D: usize>(
     });
 }
 
-/// Smooths the volume ratio J of the particles that keep their density in it (`smooths(p)`: fluids
-/// with `density_estimate = "deformation"`) over the grid, as the J-bar methods of MPM do: node
-/// values `J_i = Σ_p w_ip m_p J_p / Σ_p w_ip m_p`, then `J_p ← Σ_i w_ip J_i`. The sub-cell part of J,
-/// which no grid force can see or correct, is removed, and `Σ m_p J_p` (the total volume) is kept
-/// exactly; the averages are normalised, so a free surface or a wall does not bias them.
-/// `grid` (mass, mass·J per node) must be zero on the schedule's active blocks.
-pub fn smooth_volume_ratio<const D: usize>(
+/// Scatters the volume ratio J of the particles that keep their density in it (`smooths(p)`: fluids
+/// with `density_estimate = "deformation"`) to the regular grid: per node, `Σ_p w_ip m_p` and
+/// `Σ_p w_ip m_p J_p`, then their ratio `J_i` in the second place. P2G gathers it back,
+/// `J_p ← Σ_i w_ip J_i` ([`volume_ratio_at`]), as the J-bar methods of MPM do. `grid` must be zero on
+/// the schedule's active blocks.
+pub fn scatter_volume_ratio<const D: usize>(
     layout: &GridLayout<D>,
     schedule: &Schedule<D>,
     x: &[Vector<D>],
     mass: &[Real],
-    jp: &mut [Real],
+    jp: &[Real],
     smooths: impl Fn(usize) -> bool + Sync,
     grid: &mut [(Real, Real)],
 ) {
     let inv_h = 1.0 / layout.h;
-    {
-        let out = Disjoint::new(grid);
-        let jp = &*jp;
-        schedule.for_each_block(|reach, block| {
-            for &p in block {
-                let p = p as usize;
-                if !smooths(p) {
-                    continue;
-                }
-                let (s, origin) = stencil(layout, &x[p], inv_h);
-                reach.check(&s.base);
-                let (m, mj) = (mass[p], mass[p] * jp[p]);
-                // SAFETY: blocks scattered together never share a node (see `schedule`).
-                s.for_each(layout.h, |o, w, _| unsafe {
-                    out.update(origin + layout.offset(&o), |g| {
-                        g.0 += w * m;
-                        g.1 += w * mj;
-                    })
-                });
+    let out = Disjoint::new(grid);
+    schedule.for_each_block(|reach, block| {
+        for &p in block {
+            let p = p as usize;
+            if !smooths(p) {
+                continue;
             }
-        });
-    }
-    let grid = &*grid;
-    jp.par_iter_mut().enumerate().with_min_len(schedule.min_len(MIN_TASK)).for_each(|(p, j)| {
-        if smooths(p) {
             let (s, origin) = stencil(layout, &x[p], inv_h);
-            let mut sum = 0.0;
-            // Every node of the stencil has mass: the particle itself put w > 0 there.
-            s.for_each(layout.h, |o, w, _| {
-                let (m, mj) = grid[origin + layout.offset(&o)];
-                sum += w * mj / m;
+            reach.check(&s.base);
+            let (m, mj) = (mass[p], mass[p] * jp[p]);
+            // SAFETY: blocks scattered together never share a node (see `schedule`).
+            s.for_each(layout.h, |o, w, _| unsafe {
+                out.update(origin + layout.offset(&o), |g| {
+                    g.0 += w * m;
+                    g.1 += w * mj;
+                })
             });
-            *j = sum;
         }
     });
+    // SAFETY: node blocks do not overlap, and each active block is listed once.
+    schedule.for_each_node_of(layout, schedule.active(), |i| unsafe {
+        out.update(i, |g| {
+            if g.0 > 0.0 {
+                g.1 /= g.0;
+            }
+        })
+    });
+}
+
+/// The smoothed volume ratio of a particle: `Σ_i w_ip J_i` with `J_i = Σ_q w_iq m_q J_q / Σ_q w_iq m_q`
+/// from [`scatter_volume_ratio`]. The sub-cell part of J, which no grid force can see or correct, is
+/// removed; `Σ_p m_p J_p` (the total volume) is kept exactly, and the averages are normalised, so a
+/// free surface or a wall does not bias them. Every node of the stencil has mass: the particle itself
+/// put `w > 0` there.
+#[inline]
+pub fn volume_ratio_at<const D: usize>(
+    layout: &GridLayout<D>,
+    s: &Stencil<D>,
+    origin: usize,
+    grid: &[(Real, Real)],
+) -> Real {
+    let mut sum = 0.0;
+    s.for_each(layout.h, |o, w, _| sum += w * grid[origin + layout.offset(&o)].1);
+    sum
 }
 
 /// Stencil of a particle the schedule has sorted (so its stencil is inside the grid).
@@ -189,12 +197,14 @@ pub struct Transfer<'a, const D: usize> {
     pub augmented: Option<(&'a AugmentedGrid<D>, &'a WallParticles<D>)>,
 }
 
-/// The fluid density input of P2G: the B-spline grid mass of [`scatter_mass`] and, optionally,
-/// the nodes' wall fractions.
+/// The fluid density input of P2G: the B-spline grid mass of [`scatter_mass`] (empty when no
+/// material gathers its density from the grid) with, optionally, the nodes' wall fractions; and the
+/// node sums of [`scatter_volume_ratio`] (empty when no material smooths its J).
 #[derive(Clone, Copy)]
 pub struct GridDensity<'a> {
     pub grid_mass: &'a [Real],
     pub wall_fraction: Option<&'a [Real]>,
+    pub volume_ratio: &'a [(Real, Real)],
 }
 
 /// Particle→grid transfer of mass and momentum with the stress term. On an augmented grid,
@@ -235,16 +245,24 @@ pub fn p2g<const D: usize>(
             let x = particles.x[p];
             let (s, origin) = stencil(layout, &x, inv_h);
             reach.check(&s.base);
-            let rho = grid_density.map_or(0.0, |g| density_at(layout, &s, origin, g.grid_mass, g.wall_fraction));
+            let material = &materials[particles.material[p] as usize];
+            let (mut rho, mut jp) = (0.0, particles.jp[p]);
+            if let Some(g) = grid_density {
+                if !g.grid_mass.is_empty() {
+                    rho = density_at(layout, &s, origin, g.grid_mass, g.wall_fraction);
+                }
+                if !g.volume_ratio.is_empty() && material.smooths_volume_ratio() {
+                    jp = volume_ratio_at(layout, &s, origin, g.volume_ratio);
+                }
+            }
             let point = MaterialPoint {
                 f: particles.f[p],
-                jp: particles.jp[p],
+                jp,
                 grad_v: particles.c[p],
                 mass: particles.mass[p],
                 vol0: particles.vol0[p],
                 density: rho,
             };
-            let material = &materials[particles.material[p] as usize];
             // SAFETY (every `update` below): each particle is in one block, and blocks scattered
             // together never share a grid point (see `schedule`).
             unsafe { density_out.update(p, |d| *d = material.current_density(&point)) };
@@ -405,12 +423,14 @@ impl G2pSum {
 /// Grid→particle transfer `v_p = Σ φ v_i`, `C_p = Σ v_i gᵀ` (eq. (4)), then, per particle near
 /// a wall of an augmented grid, the fit to the wall value ([`crate::wall_fit`], `transfer =
 /// "stable"`) or the hold of particles past a wall ([`hold_at_wall`], `"paper"`), advection
-/// `x += dt v`, and the deformation update of its material.
+/// `x += dt v`, and the deformation update of its material (from the smoothed J of P2G, read back
+/// from `density`, for materials that smooth it; `density` may be empty when none does).
 pub fn g2p<const D: usize>(
     t: &Transfer<'_, D>,
     region: &dyn Region<D>,
     materials: &[Material],
     velocity: &[Vector<D>],
+    density: &[Real],
     particles: &mut Particles<D>,
     dt: Real,
 ) -> G2pOutcome
@@ -467,7 +487,12 @@ where
             *cp = cn;
             let before = *xp;
             *xp += vn * dt;
-            materials[*m as usize].update_deformation(fp, jpp, cp, dt);
+            let material = &materials[*m as usize];
+            // The J that P2G smoothed (its density ρ0/J̄ is in `density`) is the one advanced.
+            if let Some(&rho) = density.get(p).filter(|_| material.smooths_volume_ratio()) {
+                *jpp = ConstitutiveModel::<D>::density(material) / rho;
+            }
+            material.update_deformation(fp, jpp, cp, dt);
             // The particle's kinetic energy must be representable too, or the run's energy is garbage.
             let finite = xp.iter().chain(vp.iter()).chain(fp.iter()).all(|a| a.is_finite())
                 && crate::particles::energy_root(mp, vp) < f64::MAX.sqrt();
@@ -580,7 +605,7 @@ mod tests {
         grid_velocity(&t, &mut grid, &Vector2::zeros(), 1e-3);
         let before = ps.clone();
         let walls = Walls2::new(vec![], Point::new(1.0, 1.0));
-        let outcome = g2p(&t, &walls, &dust(), &grid.momentum, &mut ps, 0.0);
+        let outcome = g2p(&t, &walls, &dust(), &grid.momentum, &[], &mut ps, 0.0);
         assert_eq!((outcome.held_at_wall, outcome.non_finite, outcome.left_grid), (0, None, None));
         assert_eq!(ps.x, before.x, "dt = 0 leaves positions");
         let p_back = ps.momentum();
