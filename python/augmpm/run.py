@@ -51,7 +51,9 @@ METRIC_COLUMNS = [
 CHECKPOINT = "checkpoint.npz"
 #: Output frames between two checkpoints, unless the caller says otherwise.
 CHECKPOINT_EVERY = 10
-_CHECKPOINT_FORMAT = 1
+#: 2: the stable augmented transfer and the deformation density became the defaults (a format-1 run's
+#: scene.toml, written without those keys, would resume with other physics).
+_CHECKPOINT_FORMAT = 2
 _FRAME = re.compile(r"frame_(\d+)\.")
 
 

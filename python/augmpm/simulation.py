@@ -91,7 +91,8 @@ class Simulation:
 
     @property
     def densities(self) -> np.ndarray:
-        """Fluid density of each particle from the regular grid in the last step (kg/m² in 2D), shape (N,)."""
+        """Fluid density of each particle in the last step (kg/m² in 2D), shape (N,): ρ0/J (smoothed J) with
+        ``density_estimate = "deformation"``, gathered from the regular grid with ``"grid"``."""
         return self._sim.densities
 
     @property

@@ -39,9 +39,9 @@ impl WallCondition {
     pub fn apply_at<const D: usize>(self, v: Vector<D>, normals: &[Vector<D>; 2], wall_v: &Vector<D>) -> Vector<D> {
         let [n0, n1] = normals;
         // Orthonormal basis {e0, e1} of span{n0, n1}. Two equal normals (no corner) leave a
-        // residue of the rounding (~1e-7 in f32): only a residue above √ε is a second direction.
+        // residue of the rounding (~1e-7 in f32): only a residue above it is a second direction.
         let r = n1 - n0 * n1.dot(n0);
-        let e1 = (r.norm() > Real::EPSILON.sqrt()).then(|| r.normalize());
+        let e1 = (r.norm() > (1e-9 as Real).max(16.0 * Real::EPSILON)).then(|| r.normalize());
         let tangential = |u: Vector<D>| {
             let u = u - n0 * u.dot(n0);
             e1.map_or(u, |e1| u - e1 * u.dot(&e1))

@@ -39,28 +39,42 @@ pub struct WallFoot<const D: usize> {
 /// Most wall faces a particle takes into account at once (a corner has two; a narrow gap more).
 pub const MAX_FEET: usize = 4;
 
-/// The feet of the wall faces in reach of one particle, nearest faces first found.
+/// The feet of the wall faces in reach of one particle: the [`MAX_FEET`] nearest.
 #[derive(Clone, Copy, Debug)]
 pub struct WallFeet<const D: usize> {
     len: usize,
     feet: [Option<WallFoot<D>>; MAX_FEET],
+    /// Distance (m) from the particle to each foot.
+    distance: [Real; MAX_FEET],
 }
 
 impl<const D: usize> Default for WallFeet<D> {
     fn default() -> Self {
-        Self { len: 0, feet: [None; MAX_FEET] }
+        Self { len: 0, feet: [None; MAX_FEET], distance: [0.0; MAX_FEET] }
     }
 }
 
 impl<const D: usize> WallFeet<D> {
-    /// Adds a foot unless the same face point is already there (a polygon edge lying on the
-    /// domain box) or the list is full.
-    pub fn push(&mut self, foot: WallFoot<D>, tolerance: Real) {
+    /// Adds a foot at `distance` (m) from the particle unless the same face point is already there
+    /// (a polygon edge lying on the domain box); when the list is full, it replaces the farthest
+    /// foot if it is nearer.
+    pub fn push(&mut self, foot: WallFoot<D>, distance: Real, tolerance: Real) {
         let same = |f: &WallFoot<D>| (f.x - foot.x).norm() <= tolerance && f.normal.dot(&foot.normal) > 1.0 - 1e-6;
-        if self.len < MAX_FEET && !self.iter().any(same) {
-            self.feet[self.len] = Some(foot);
-            self.len += 1;
+        if self.iter().any(same) {
+            return;
         }
+        let slot = if self.len < MAX_FEET {
+            self.len += 1;
+            self.len - 1
+        } else {
+            let far = (0..MAX_FEET).max_by(|&a, &b| self.distance[a].total_cmp(&self.distance[b])).unwrap_or(0);
+            if self.distance[far] <= distance {
+                return;
+            }
+            far
+        };
+        self.feet[slot] = Some(foot);
+        self.distance[slot] = distance;
     }
 
     pub fn iter(&self) -> impl Iterator<Item = &WallFoot<D>> {
@@ -81,8 +95,9 @@ pub trait Region<const D: usize>: Send + Sync {
     fn distance(&self, x: &Vector<D>) -> WallDistance<D>;
 
     /// The feet on the wall faces that bound the region within `reach` (m) of `x`: on each
-    /// straight face whose perpendicular from `x` lands inside it, at each reflex corner `x` sees
-    /// past both faces, and on each circle. A region without walls has none.
+    /// straight face whose perpendicular from `x` lands inside it, at each corner `x` lies past
+    /// both faces of (a reflex corner seen from inside, or a convex one from a particle that has
+    /// left the region), and on each circle. A region without walls has none.
     fn wall_feet(&self, _x: &Vector<D>, _reach: Real) -> WallFeet<D> {
         WallFeet::default()
     }
@@ -404,7 +419,7 @@ impl Region<2> for Walls2 {
         let mut add = |q: Point, normal: Point, wall: usize, curvature: Real| {
             if self.distance(&q).distance.abs() <= tolerance {
                 let velocity = self.surface_velocity(wall, &q, &normal);
-                feet.push(WallFoot { x: q, normal, wall, velocity, curvature }, tolerance);
+                feet.push(WallFoot { x: q, normal, wall, velocity, curvature }, (x - q).norm(), tolerance);
             }
         };
         let polygons = self
@@ -433,12 +448,15 @@ impl Region<2> for Walls2 {
                         add(q, Point::new(e.y, -e.x).normalize(), wall, 0.0);
                     }
                 }
-                // A reflex corner at a (the polygon turns clockwise there): x past the end of the
-                // edge before and before the start of this one sees the corner itself.
+                // x past the end of the edge before a and before the start of this one sees the
+                // corner a itself: at a reflex corner (the polygon turns clockwise there) from inside,
+                // the wall lies towards a; at a convex one x has left the region, and the wall lies
+                // back towards the material (so a particle that escaped there goes no farther).
                 let before = a - poly.vertices[(k + n - 1) % n];
                 let d = (a - x).norm();
-                if before.perp(&e) < 0.0 && t <= 0.0 && along((k + n - 1) % n) >= 1.0 && d > 0.0 && d < reach {
-                    add(a, (a - x) / d, wall, 0.0);
+                if t <= 0.0 && along((k + n - 1) % n) >= 1.0 && d > 0.0 && d < reach {
+                    let normal = if before.perp(&e) < 0.0 { (a - x) / d } else { (x - a) / d };
+                    add(a, normal, wall, 0.0);
                 }
             }
         }
@@ -514,6 +532,81 @@ mod tests {
             SurfaceMotion { velocity: Point::zeros(), tangential_speed: 3.0, center: Some(Point::new(0.5, 0.5)) };
         let v = spin.at(&Point::new(0.7, 0.5), &Point::new(-1.0, 0.0));
         assert!((v - Point::new(0.0, 3.0)).norm() < 1e-15);
+    }
+
+    /// The feet of a particle: one per face in reach with the face's outward normal; a polygon edge on
+    /// the domain box counts once; an edge inside another polygon of the union is no wall; a reflex
+    /// corner seen past both faces is a foot, as is a convex corner seen by a particle that left.
+    #[test]
+    fn wall_feet_of_polygons() {
+        let reach = 0.15;
+        // A container whose floor lies on the domain box's bottom edge.
+        let walls = Walls2::new(vec![WallShape::Polygon(square())], Point::new(1.0, 1.0));
+        let feet = walls.wall_feet(&Point::new(0.5, 0.1), reach);
+        assert_eq!(feet.len(), 1);
+        let f = feet.iter().next().unwrap();
+        assert!((f.x - Point::new(0.5, 0.0)).norm() < 1e-15 && (f.normal - Point::new(0.0, -1.0)).norm() < 1e-15);
+        assert_eq!(walls.wall_feet(&Point::new(0.1, 0.05), reach).len(), 2); // the corner: floor and left wall
+        assert!(walls.wall_feet(&Point::new(0.5, 0.5), reach).is_empty());
+        // An L of two overlapping rectangles: A's top edge within B is no wall.
+        let a =
+            Polygon::new(vec![Point::new(0.1, 0.1), Point::new(0.9, 0.1), Point::new(0.9, 0.4), Point::new(0.1, 0.4)]);
+        let b =
+            Polygon::new(vec![Point::new(0.1, 0.1), Point::new(0.4, 0.1), Point::new(0.4, 0.9), Point::new(0.1, 0.9)]);
+        let union = Walls2::new(vec![WallShape::Polygon(a), WallShape::Polygon(b)], Point::new(1.0, 1.0));
+        let feet = union.wall_feet(&Point::new(0.25, 0.35), reach);
+        assert!(feet.iter().all(|f| (f.x.y - 0.4).abs() > 1e-9), "A's top edge inside B is no wall");
+        // A reflex corner of one polygon (an L, counter-clockwise), seen from inside past both faces.
+        let l = Polygon::new(vec![
+            Point::new(0.1, 0.1),
+            Point::new(0.9, 0.1),
+            Point::new(0.9, 0.4),
+            Point::new(0.4, 0.4),
+            Point::new(0.4, 0.9),
+            Point::new(0.1, 0.9),
+        ]);
+        let walls = Walls2::new(vec![WallShape::Polygon(l)], Point::new(1.0, 1.0));
+        let x = Point::new(0.35, 0.35);
+        let feet = walls.wall_feet(&x, reach);
+        let corner = feet.iter().find(|f| (f.x - Point::new(0.4, 0.4)).norm() < 1e-15).expect("the reflex corner");
+        assert!((corner.normal - (Point::new(0.4, 0.4) - x).normalize()).norm() < 1e-12);
+        // A particle that left the unit square past its convex corner (1, 1) faces back towards it.
+        let walls = Walls2::new(vec![WallShape::Polygon(square())], Point::new(2.0, 2.0));
+        let out = Point::new(1.05, 1.05);
+        let feet = walls.wall_feet(&out, reach);
+        assert_eq!(feet.len(), 1);
+        let f = feet.iter().next().unwrap();
+        assert!((f.normal - (out - Point::new(1.0, 1.0)).normalize()).norm() < 1e-12);
+    }
+
+    /// Circles: an obstacle's foot faces its centre and is flat for the fit (curvature 0: a straight
+    /// step moves away from it); a container's faces outward with curvature 1/R.
+    #[test]
+    fn wall_feet_of_circles() {
+        let c = Circle { center: Point::new(0.5, 0.5), radius: 0.2 };
+        let obstacle = Walls2::new(vec![WallShape::Circle(c.clone(), Side::Outside)], Point::new(1.0, 1.0));
+        let f = *obstacle.wall_feet(&Point::new(0.8, 0.5), 0.15).iter().next().unwrap();
+        assert!((f.x - Point::new(0.7, 0.5)).norm() < 1e-15 && (f.normal - Point::new(-1.0, 0.0)).norm() < 1e-15);
+        assert_eq!(f.curvature, 0.0);
+        let container = Walls2::new(vec![WallShape::Circle(c, Side::Inside)], Point::new(1.0, 1.0));
+        let f = *container.wall_feet(&Point::new(0.6, 0.5), 0.15).iter().next().unwrap();
+        assert!((f.x - Point::new(0.7, 0.5)).norm() < 1e-15 && (f.normal - Point::new(1.0, 0.0)).norm() < 1e-15);
+        assert!((f.curvature - 5.0).abs() < 1e-12);
+    }
+
+    /// With more faces in reach than it holds, a particle keeps the nearest ones.
+    #[test]
+    fn wall_feet_keep_the_nearest() {
+        let mut feet = WallFeet::<2>::default();
+        for k in 0..(MAX_FEET + 2) {
+            let d = [0.5, 0.1, 0.4, 0.05, 0.3, 0.2][k];
+            let n = Point::new((k as Real).cos(), (k as Real).sin());
+            let foot = WallFoot { x: n * d, normal: n, wall: k, velocity: Point::zeros(), curvature: 0.0 };
+            feet.push(foot, d, 1e-12);
+        }
+        let mut kept: Vec<usize> = feet.iter().map(|f| f.wall).collect();
+        kept.sort_unstable();
+        assert_eq!(kept, vec![1, 3, 4, 5]); // distances 0.1, 0.05, 0.3, 0.2
     }
 
     #[test]

@@ -219,8 +219,9 @@ impl Default for AugmentedSpec {
 
 /// Largest grid accepted (nodes, ghosts included): 16.7 M nodes, about 1 GB of node state.
 const MAX_GRID_NODES: u64 = 1 << 24;
-/// Bytes per grid node: mass, B-spline mass, momentum (2D), density mass, flags and blocks.
-const GRID_BYTES_PER_NODE: u64 = 6 * std::mem::size_of::<Real>() as u64;
+/// Bytes per grid node: mass, B-spline mass, momentum (2D), the density's node sums (the grid density's
+/// mass, or the smoothed J's volume and volume·J), flags and blocks.
+const GRID_BYTES_PER_NODE: u64 = 7 * std::mem::size_of::<Real>() as u64;
 /// Largest number of jittered candidate points per body: 20 M particles need about 4 GB.
 const MAX_SEED_CANDIDATES: u64 = 20_000_000;
 
@@ -568,7 +569,15 @@ impl Scene {
         };
         let (dt, warning) = self.dt(model.stable_dt())?;
         model.dt = dt;
-        Ok((Simulation::new(model, particles), warning.into_iter().collect()))
+        let mut warnings: Vec<String> = warning.into_iter().collect();
+        if self.grid.density_wall_correction && model.wall_fraction.is_none() {
+            warnings.push(
+                "grid.density_wall_correction has no effect: no fluid gathers its density from the grid \
+                 (it applies to density_estimate = \"grid\")"
+                    .to_string(),
+            );
+        }
+        Ok((Simulation::new(model, particles), warnings))
     }
 }
 

@@ -128,7 +128,7 @@ pub struct State<const D: usize> {
     /// Largest move of a particle in the last step (cell widths).
     pub max_cfl: Real,
     pub particles: Particles<D>,
-    /// Grid density of each particle in the last step (empty for models without fluids).
+    /// Density of each particle in the last step (ρ0/J̄ or the grid's; see [`Simulation::grid_density`]).
     pub density: Vec<Real>,
     /// Block each particle was binned in ([`Schedule::binning`]).
     pub bins: Vec<u32>,
@@ -143,7 +143,7 @@ struct Scratch<const D: usize> {
     grid: GridState<D>,
     /// B-spline grid mass of the density estimate (fluids only; empty otherwise).
     density_mass: Vec<Real>,
-    /// Per node, mass and mass·J of the particles whose J is smoothed (empty when none is), and per
+    /// Per node, rest volume and rest volume·J of the particles whose J is smoothed (empty when none is), and per
     /// material whether its particles take part.
     volume_ratio: Vec<(Real, Real)>,
     smooths: Vec<bool>,
@@ -470,7 +470,7 @@ where
                 layout,
                 schedule,
                 &particles.x,
-                &particles.mass,
+                &particles.vol0,
                 &particles.jp,
                 |p| smooths[material[p] as usize],
                 volume_ratio,
@@ -537,8 +537,8 @@ where
         }
     }
 
-    /// Density (kg/m³, or kg/m² in 2D) of each particle as gathered from the regular grid in
-    /// the last step; only for models that use it (fluids), zero before the first step.
+    /// Density (kg/m³, or kg/m² in 2D) of each particle in the last step, as its material saw it
+    /// (fluids: ρ0/J̄ or gathered from the regular grid), zero before the first step.
     pub fn grid_density(&self) -> &[Real] {
         &self.scratch.density
     }

@@ -44,15 +44,16 @@ pub fn scatter_mass<const D: usize>(
 }
 
 /// Scatters the volume ratio J of the particles that keep their density in it (`smooths(p)`: fluids
-/// with `density_estimate = "deformation"`) to the regular grid: per node, `Σ_p w_ip m_p` and
-/// `Σ_p w_ip m_p J_p`, then their ratio `J_i` in the second place. P2G gathers it back,
+/// with `density_estimate = "deformation"`) to the regular grid: per node, `Σ_p w_ip V⁰_p` and
+/// `Σ_p w_ip V⁰_p J_p` (rest volumes: `V⁰ J` is a particle's volume), then their ratio `J_i` in the
+/// second place. P2G gathers it back,
 /// `J_p ← Σ_i w_ip J_i` ([`volume_ratio_at`]), as the J-bar methods of MPM do. `grid` must be zero on
 /// the schedule's active blocks.
 pub fn scatter_volume_ratio<const D: usize>(
     layout: &GridLayout<D>,
     schedule: &Schedule<D>,
     x: &[Vector<D>],
-    mass: &[Real],
+    vol0: &[Real],
     jp: &[Real],
     smooths: impl Fn(usize) -> bool + Sync,
     grid: &mut [(Real, Real)],
@@ -67,7 +68,7 @@ pub fn scatter_volume_ratio<const D: usize>(
             }
             let (s, origin) = stencil(layout, &x[p], inv_h);
             reach.check(&s.base);
-            let (m, mj) = (mass[p], mass[p] * jp[p]);
+            let (m, mj) = (vol0[p], vol0[p] * jp[p]);
             // SAFETY: blocks scattered together never share a node (see `schedule`).
             s.for_each(layout.h, |o, w, _| unsafe {
                 out.update(origin + layout.offset(&o), |g| {
@@ -87,9 +88,9 @@ pub fn scatter_volume_ratio<const D: usize>(
     });
 }
 
-/// The smoothed volume ratio of a particle: `Σ_i w_ip J_i` with `J_i = Σ_q w_iq m_q J_q / Σ_q w_iq m_q`
+/// The smoothed volume ratio of a particle: `Σ_i w_ip J_i` with `J_i = Σ_q w_iq V⁰_q J_q / Σ_q w_iq V⁰_q`
 /// from [`scatter_volume_ratio`]. The sub-cell part of J, which no grid force can see or correct, is
-/// removed; `Σ_p m_p J_p` (the total volume) is kept exactly, and the averages are normalised, so a
+/// removed; `Σ_p V⁰_p J_p` (the total volume) is kept exactly, and the averages are normalised, so a
 /// free surface or a wall does not bias them. Every node of the stencil has mass: the particle itself
 /// put `w > 0` there.
 #[inline]
@@ -298,6 +299,8 @@ pub fn p2g<const D: usize>(
                                 momentum.update(i, |m| *m += (vp + cp * d) * (phi * mp) - force * grad);
                             }
                         }),
+                        // A particle whose grid points all have zero weight (deep in a wall) gives nothing.
+                        AugmentedTransfer::Stable if total <= 0.0 => {}
                         AugmentedTransfer::Stable => {
                             let share = mp / total;
                             g.for_each_near(layout, &x, near, |i, w, d| {

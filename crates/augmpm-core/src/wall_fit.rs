@@ -84,7 +84,8 @@ pub fn fit_to_walls<const D: usize>(
         let fitted = *v + *c * d;
         let n = foot.normal;
         let inward = if foot.curvature > 0.0 && dt > 0.0 {
-            let rho = 1.0 / foot.curvature - d.norm();
+            // The particle's distance from the circle's centre (the foot lies a radius out along n).
+            let rho = (*x - (foot.x - n / foot.curvature)).norm();
             let step = (*v - n * n.dot(v)).norm() * dt;
             // Inward by δ with (ρ − δ)² + step² = ρ²: the step's chord ends at ρ again.
             (rho - (rho * rho - step * step).max(0.0).sqrt()) / dt
@@ -176,7 +177,7 @@ mod tests {
 
     fn foot(x: Vector2<Real>, normal: Vector2<Real>, curvature: Real) -> WallFeet<2> {
         let mut feet = WallFeet::default();
-        feet.push(WallFoot { x, normal, wall: 0, velocity: Vector2::zeros(), curvature }, 1e-12);
+        feet.push(WallFoot { x, normal, wall: 0, velocity: Vector2::zeros(), curvature }, 0.0, 1e-12);
         feet
     }
 

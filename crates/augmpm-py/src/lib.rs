@@ -374,7 +374,7 @@ impl PySimulation {
         guard(|| Ok(with_sim!(&self.engine, s, core => scalars_to_array(py, &s.particles.mass))))
     }
 
-    /// Fluid density of each particle gathered from the regular grid in the last step (kg/m²), shape (N,).
+    /// Fluid density of each particle in the last step (kg/m²), shape (N,): ρ0/J or gathered from the grid.
     #[getter]
     fn densities<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
         guard(|| Ok(with_sim!(&self.engine, s, core => scalars_to_array(py, s.grid_density()))))

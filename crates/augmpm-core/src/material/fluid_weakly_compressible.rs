@@ -47,6 +47,10 @@ fn default_gamma() -> Real {
     7.0
 }
 
+/// With the deformation density, the stress volume of a particle follows its dilation up to this
+/// factor of its rest volume.
+pub const MAX_DILATION: Real = 1.25;
+
 impl WeaklyCompressibleFluid {
     /// Pressure (Pa) at density `rho`.
     pub fn pressure(&self, rho: Real) -> Real {
@@ -80,23 +84,25 @@ impl WeaklyCompressibleFluid {
 impl<const D: usize> ConstitutiveModel<D> for WeaklyCompressibleFluid {
     fn volume_stress(&self, p: &MaterialPoint<D>) -> Matrix<D> {
         let density = ConstitutiveModel::<D>::current_density(self, p);
-        // The grid estimate of ρ falls far below ρ0 only where neighbours are missing (free
-        // surface, spray): in the bulk the pressure clamp keeps ρ within ~0.1% of ρ0. Taking
-        // V = m/ρ there would inflate an isolated particle's volume ~10×, and with it the
-        // explicit viscous coefficient μV/(m h²), which then blows up. So V ≤ m/ρ0; the
-        // pressure still sees the estimated ρ.
+        // The stress acts over the particle's volume V = m/ρ, bounded: the grid estimate of ρ falls
+        // far below ρ0 where neighbours are missing (free surface, spray), and V = m/ρ there would
+        // inflate an isolated particle's volume ~10×, and with it the explicit viscous coefficient
+        // μV/(m h²), which then blows up; so V ≤ m/ρ0 with it. J is the particle's own volume
+        // change, so with it V follows a dilated fluid (which otherwise feels too little viscous
+        // stress) up to `MAX_DILATION` V0, which `stable_dt` accounts for.
         let floor = match self.density_estimate {
             DensityEstimate::Grid => self.density,
-            DensityEstimate::Deformation => 0.5 * self.density,
+            DensityEstimate::Deformation => self.density / MAX_DILATION,
         };
         let volume = p.mass / density.max(floor);
         self.cauchy_stress(density, &p.grad_v) * volume
     }
 
     fn update_deformation(&self, _f: &mut Matrix<D>, jp: &mut Real, grad_v: &Matrix<D>, dt: Real) {
-        // F is not needed; with the deformation estimate `jp` holds J, J̇ = J tr(∇v).
+        // F is not needed; with the deformation estimate `jp` holds J, J̇ = J tr(∇v), integrated
+        // exactly for the step's constant ∇v (J stays positive however large the step's divergence).
         if self.density_estimate == DensityEstimate::Deformation {
-            *jp *= 1.0 + dt * grad_v.trace();
+            *jp *= (dt * grad_v.trace()).exp();
         }
     }
 
@@ -120,9 +126,14 @@ impl<const D: usize> ConstitutiveModel<D> for WeaklyCompressibleFluid {
     }
 
     fn stable_dt(&self, h: Real) -> Real {
-        // Sound speed c² = dp/dρ at rest = kγ/ρ0; viscous diffusion needs ν dt/h² ≤ 1/(2D).
+        // Sound speed c² = dp/dρ at rest = kγ/ρ0; viscous diffusion needs ν dt/h² ≤ 1/(2D), with
+        // ν = μV/m as large as the stress volume V gets.
         let sound = h / (self.stiffness * self.gamma / self.density).sqrt();
-        let nu = self.viscosity / self.density;
+        let dilation = match self.density_estimate {
+            DensityEstimate::Grid => 1.0,
+            DensityEstimate::Deformation => MAX_DILATION,
+        };
+        let nu = self.viscosity * dilation / self.density;
         let viscous = if nu > 0.0 { h * h / (2.0 * D as Real * nu) } else { Real::INFINITY };
         sound.min(viscous)
     }
@@ -186,8 +197,8 @@ mod tests {
     }
 
     /// With the deformation estimate, a particle compressed by a uniform flow ∇v = −s I over n
-    /// steps has J = (1 − 2 s dt)ⁿ in 2D (J̇ = J tr ∇v, forward Euler) and reads ρ = ρ0 / J; the
-    /// grid density it is handed is ignored.
+    /// steps has J = exp(−2 s n dt) in 2D (J̇ = J tr ∇v) and reads ρ = ρ0 / J; the grid density it
+    /// is handed is ignored.
     #[test]
     fn deformation_density_follows_the_volume_change() {
         let f = WeaklyCompressibleFluid { density_estimate: DensityEstimate::Deformation, ..water() };
@@ -198,8 +209,8 @@ mod tests {
         for _ in 0..n {
             f.update_deformation(&mut fm, &mut jp, &grad_v, dt);
         }
-        let expect = (1.0 - 2.0 * s * dt).powi(n);
-        assert!((jp - expect).abs() < 1e-15, "{jp} vs {expect}");
+        let expect = (-2.0 * s * dt * n as f64).exp();
+        assert!((jp - expect).abs() < 1e-14, "{jp} vs {expect}");
         let p = MaterialPoint::<2> { f: fm, jp, grad_v: Matrix2::zeros(), mass: 2.0, vol0: 0.0, density: 1.0 };
         assert!((ConstitutiveModel::<2>::current_density(&f, &p) - 1000.0 / expect).abs() < 1e-9);
         let vs = f.volume_stress(&p);
