@@ -289,7 +289,13 @@ pub fn p2g<const D: usize>(
                     });
                 }
                 Some((g, (minv, near, total))) => {
-                    let force = stress * dt;
+                    let mut force = stress * dt;
+                    if g.transfer == AugmentedTransfer::Stable
+                        && material.smooths_volume_ratio()
+                        && point.jp > SEPARATED
+                    {
+                        force *= lone_particle_stress_scale(minv, total, material, h, dt);
+                    }
                     match g.transfer {
                         AugmentedTransfer::Paper => g.for_each_near(layout, &x, near, |i, w, d| {
                             let (phi, grad) = minv.shape(w, &d);
@@ -318,6 +324,36 @@ pub fn p2g<const D: usize>(
             }
         }
     });
+}
+
+/// A fluid particle dilated beyond this volume ratio has separated from the bulk (spray, a free end):
+/// its grid points get their mass from it alone.
+pub const SEPARATED: Real = 1.1;
+
+/// The factor (≤ 1) on the stress of a particle whose grid points get their mass from it alone, so that
+/// the explicit stress update stays within its stable step. For such a particle a step maps its
+/// velocity gradient C to about C − dt (V/m) (dσ/dC) Σw·Γ, with Γ the gradient block of its `M⁻¹`: the
+/// materials' stable step (`stable_dt`) assumes the regular Γ = 4/h² I, and next to a wall Σw·Γ can be
+/// much stiffer (its points lie on one side). Bulk particles share their nodes' mass with their
+/// neighbours and need no such factor.
+#[inline]
+fn lone_particle_stress_scale<const D: usize>(
+    minv: &crate::kernel::MlsInverse<D>,
+    total: Real,
+    material: &Material,
+    h: Real,
+    dt: Real,
+) -> Real
+where
+    Dim<D>: DimOps<D>,
+{
+    let stiffness = total * -<Dim<D> as DimOps<D>>::min_sym_eigenvalue(&(-minv.gamma));
+    let stable = 4.0 / (h * h) * ConstitutiveModel::<D>::stable_dt(material, h) / dt;
+    if stiffness > stable {
+        stable / stiffness
+    } else {
+        1.0
+    }
 }
 
 /// With `transfer = "paper"`, a node whose MLS mass `Σ φ m_p` is below this fraction of its
@@ -692,6 +728,28 @@ mod tests {
         let mut v = Point::new(1.0, -2.0);
         assert!(!hold_at_wall(&walls, &Point::new(0.5, 0.2), &mut v));
         assert_eq!(v, Point::new(1.0, -2.0));
+    }
+
+    /// A lone particle's stress keeps its full size while its MLS system is no stiffer than the regular
+    /// grid's at the materials' stable step, and is scaled by exactly the excess beyond it.
+    #[test]
+    fn lone_particle_stress_is_scaled_to_the_stable_step() {
+        let h = 0.1;
+        let water = Material::Fluid(WeaklyCompressibleFluid {
+            density: 1000.0,
+            stiffness: 1e4,
+            gamma: 7.0,
+            viscosity: 1.0,
+            min_pressure: 0.0,
+            density_estimate: crate::material::DensityEstimate::Deformation,
+        });
+        let stable = ConstitutiveModel::<2>::stable_dt(&water, h);
+        let regular = crate::kernel::MlsInverse::<2>::regular(h);
+        assert!((lone_particle_stress_scale(&regular, 1.0, &water, h, stable) - 1.0).abs() < 1e-12);
+        assert_eq!(lone_particle_stress_scale(&regular, 1.0, &water, h, 0.5 * stable), 1.0);
+        let stiff = crate::kernel::MlsInverse::<2> { gamma: regular.gamma * 6.0, ..regular };
+        let scale = lone_particle_stress_scale(&stiff, 1.0, &water, h, 0.5 * stable);
+        assert!((scale - 2.0 / 6.0).abs() < 1e-12, "{scale}");
     }
 
     /// P2G sums are bitwise identical on 1 and 2 threads (the coloured scatter fixes their order).
