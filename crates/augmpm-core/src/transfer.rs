@@ -216,8 +216,9 @@ pub struct GridDensity<'a> {
 ///   (Σ over the particle's grid points): every mass is positive, mass is conserved, and P2G is
 ///   the transpose of the G2P fit, so a round trip cannot add kinetic energy.
 ///
-/// The force weight `g` comes from the particle's MLS inverse in both. Each particle's stress `V_p σ_p` is computed here from its material (with its grid
-/// density, written to `density`, when `grid_density` is given). `grid` must be zero on the
+/// The force weight `g` comes from the particle's MLS inverse in both. Each particle's stress
+/// `V_p σ_p` is computed here from its material, with the density it sees (gathered from the grid,
+/// or ρ0/J̄ with its J smoothed, when `grid_density` holds them), which is written to `density`. `grid` must be zero on the
 /// schedule's active blocks and on the boundary points.
 ///
 /// Away from walls φ = w and g = 4/h² w (x_i − x_p), and the momentum is `w (m v + A (x_i − x_p))`
@@ -357,8 +358,8 @@ where
 }
 
 /// With `transfer = "paper"`, a node whose MLS mass `Σ φ m_p` is below this fraction of its
-/// B-spline mass `Σ w m_p` divides its momentum by that fraction of the B-spline mass instead. Near walls φ = w(α + β·d)
-/// can vanish or turn negative while the force weight g = w(β + Γd) does not, so a node could get
+/// B-spline mass `Σ w m_p` divides its momentum by that fraction of the B-spline mass instead. Near
+/// walls φ = w(α + β·d) can vanish or turn negative while the force weight g = w(β + Γd) does not, so a node could get
 /// a finite force on a vanishing mass; with the floor its acceleration stays within 1/fraction of
 /// what the B-spline weights would give (on the regular grid φ = w and nothing changes).
 pub const LOW_MASS_FRACTION: Real = 0.5;

@@ -47,8 +47,8 @@ struct Row<const D: usize> {
 }
 
 /// Corrects the grid fit `(v, c)` of a particle at `x` (its MLS inverse `minv` over the grid
-/// points, eq. (5); `h` the cell width (m), `dt` the step (s)) by the wall terms of `feet` under each wall's condition in `conditions`:
-/// sticky asks for the wall's tangential velocity (every component), slip for no normal velocity,
+/// points, eq. (5); `h` the cell width (m), `dt` the step (s)) by the wall terms of `feet` under
+/// each wall's condition in `conditions`: sticky asks for the wall's tangential velocity (every component), slip for no normal velocity,
 /// separate for no normal velocity only where the fit moves into the wall. Returns how many
 /// scalar conditions acted.
 ///
