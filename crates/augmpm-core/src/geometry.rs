@@ -327,22 +327,25 @@ impl Walls2 {
 }
 
 impl Walls2 {
-    /// Boundary grid points at spacing ≤ `h` (m) along every wall: polygon vertices (two
-    /// normals) plus the points that split each edge into ⌈len/h⌉ equal parts, and
-    /// ⌈2πr/h⌉ points around each circle. Only points on the boundary of the material
-    /// region are kept (e.g. the domain box is dropped where a polygon lies inside it).
-    pub fn boundary_points(&self, h: Real) -> Vec<BoundaryPoint<2>> {
-        let mut out = Vec::new();
-        let polygons = self
-            .walls
+    /// The polygon walls with their indices, the domain box last.
+    fn polygons(&self) -> impl Iterator<Item = (usize, &Polygon)> {
+        self.walls
             .iter()
             .enumerate()
             .filter_map(|(i, w)| match w {
                 WallShape::Polygon(p) => Some((i, p)),
                 WallShape::Circle(..) => None,
             })
-            .chain(std::iter::once((self.box_index(), &self.domain_box)));
-        for (wall, poly) in polygons {
+            .chain(std::iter::once((self.box_index(), &self.domain_box)))
+    }
+
+    /// Boundary grid points at spacing ≤ `h` (m) along every wall: polygon vertices (two
+    /// normals) plus the points that split each edge into ⌈len/h⌉ equal parts, and
+    /// ⌈2πr/h⌉ points around each circle. Only points on the boundary of the material
+    /// region are kept (e.g. the domain box is dropped where a polygon lies inside it).
+    pub fn boundary_points(&self, h: Real) -> Vec<BoundaryPoint<2>> {
+        let mut out = Vec::new();
+        for (wall, poly) in self.polygons() {
             let n = poly.vertices.len();
             let normal = |i: usize| {
                 let e = poly.vertices[(i + 1) % n] - poly.vertices[i];
@@ -422,16 +425,7 @@ impl Region<2> for Walls2 {
                 feet.push(WallFoot { x: q, normal, wall, velocity, curvature }, (x - q).norm(), tolerance);
             }
         };
-        let polygons = self
-            .walls
-            .iter()
-            .enumerate()
-            .filter_map(|(i, w)| match w {
-                WallShape::Polygon(p) => Some((i, p)),
-                WallShape::Circle(..) => None,
-            })
-            .chain(std::iter::once((self.box_index(), &self.domain_box)));
-        for (wall, poly) in polygons {
+        for (wall, poly) in self.polygons() {
             let n = poly.vertices.len();
             // Where x's perpendicular lands on each edge, as a fraction of its length.
             let along = |k: usize| {
