@@ -6,7 +6,7 @@
 //! Particle→grid stages scatter through a [`Schedule`] (coloured blocks, no atomics,
 //! bitwise reproducible for any thread count); grid→particle stages are per particle.
 
-use crate::augmented::{AugmentedGrid, AugmentedTransfer, WallParticles};
+use crate::augmented::{AugmentedGrid, AugmentedTransfer, WallEntry, WallParticles};
 use crate::geometry::Region;
 use crate::grid::{GridLayout, GridState};
 use crate::kernel::Stencil;
@@ -289,7 +289,7 @@ pub fn p2g<const D: usize>(
                         }
                     });
                 }
-                Some((g, (minv, near, total))) => {
+                Some((g, WallEntry { minv, near, total, tilt })) => {
                     let mut force = stress * dt;
                     if g.transfer == AugmentedTransfer::Stable
                         && material.smooths_volume_ratio()
@@ -311,6 +311,7 @@ pub fn p2g<const D: usize>(
                         AugmentedTransfer::Stable => {
                             let share = mp / total;
                             g.for_each_near(layout, &x, near, |i, w, d| {
+                                let w = tilt.weight(w, &d);
                                 let (_, grad) = minv.shape(w, &d);
                                 let m_i = w * share;
                                 unsafe {
@@ -505,8 +506,9 @@ where
                     });
                     cn *= apic;
                 }
-                Some((g, (minv, near, _))) => {
+                Some((g, WallEntry { minv, near, tilt, .. })) => {
                     g.for_each_near(layout, xp, near, |i, w, d| {
+                        let w = tilt.weight(w, &d);
                         let vi = velocity[i];
                         let (phi, grad) = minv.shape(w, &d);
                         vn += vi * phi;
