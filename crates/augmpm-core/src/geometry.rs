@@ -81,6 +81,19 @@ impl<const D: usize> WallFeet<D> {
         self.feet[..self.len].iter().flatten()
     }
 
+    /// For a particle at `x` that lies on or past the walls: moves the foot of each face it lies past
+    /// to `x` itself, so that the fit meets that face's condition at the particle. At the foot behind it
+    /// the fit would leave the particle a normal velocity `r n·C n` outward (r its depth), and a normal
+    /// strain rate that persists (a lone particle sliding along a ceiling keeps its C) would carry it
+    /// out exponentially from wherever rounding put it.
+    pub fn pin_past(&mut self, x: &Vector<D>) {
+        for foot in self.feet[..self.len].iter_mut().flatten() {
+            if (foot.x - x).dot(&foot.normal) <= 0.0 {
+                foot.x = *x;
+            }
+        }
+    }
+
     pub fn len(&self) -> usize {
         self.len
     }

@@ -519,7 +519,10 @@ where
                             held = !g.surely_inside(layout, xp) && hold_at_wall(region, xp, &mut vn);
                         }
                         AugmentedTransfer::Stable => {
-                            let feet = region.wall_feet(xp, WALL_REACH * h);
+                            let mut feet = region.wall_feet(xp, WALL_REACH * h);
+                            if !g.surely_inside(layout, xp) && region.distance(xp).distance >= 0.0 {
+                                feet.pin_past(xp);
+                            }
                             crate::wall_fit::fit_to_walls(minv, xp, &feet, &g.walls, (h, dt), &mut vn, &mut cn);
                         }
                     }

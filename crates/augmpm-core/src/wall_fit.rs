@@ -207,6 +207,26 @@ mod tests {
         }
     }
 
+    /// A particle that rounding put a depth r past a ceiling (slip), in a fitted field that stretches
+    /// normal to the wall (C_nn = 20/s), is carried farther out at r·C_nn when the condition is met at
+    /// the foot behind it, and not at all once its foot is pinned to it: its normal velocity is zero.
+    #[test]
+    fn a_particle_past_a_wall_is_not_carried_farther_out() {
+        let (h, depth) = (0.01, 1e-7);
+        let minv = MlsInverse::<2>::regular(h);
+        let normal = Vector2::new(0.0, 1.0); // into the ceiling at y = 0.8
+        let x = Vector2::new(0.5, 0.8 + depth);
+        let stretch = Matrix2::new(0.0, 0.0, 0.0, 20.0);
+        let mut feet = foot(Vector2::new(0.5, 0.8), normal, 0.0);
+        let (mut v, mut c) = (Vector2::new(1.0, 0.0), stretch);
+        fit_to_walls(&minv, &x, &feet, &[WallCondition::Slip], (h, 1e-3), &mut v, &mut c);
+        assert!((v.dot(&normal) - depth * 20.0).abs() < 1e-6 * depth * 20.0, "at the foot: {v}");
+        feet.pin_past(&x);
+        let (mut v, mut c) = (Vector2::new(1.0, 0.0), stretch);
+        fit_to_walls(&minv, &x, &feet, &[WallCondition::Slip], (h, 1e-3), &mut v, &mut c);
+        assert!(v.dot(&normal).abs() < 1e-15 && (v.x - 1.0).abs() < 1e-12, "pinned: {v}");
+    }
+
     /// Inside a circular container of radius R, a particle on the slip wall moving along it at
     /// speed U gets the inward normal velocity that keeps it on the wall over a straight step:
     /// |x + dt v − c| = R (to rounding), where without the correction it would end U²dt²/2R out.
