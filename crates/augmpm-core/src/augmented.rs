@@ -3,12 +3,11 @@
 //! material, and every particle solves its own MLS system (eq. (3)–(6)) over
 //! the included nodes and boundary points in its B-spline support.
 
-use crate::boundary::WallCondition;
 use crate::geometry::Region;
-use crate::grid::GridLayout;
+use crate::grid::{GridLayout, OutOfGrid};
 use crate::kernel::{weight, MlsInverse, MlsKind, Moments, Stencil};
 use crate::math::{floor_i64, DimOps, Real, Vector};
-use crate::transfer::OutOfGrid;
+use crate::wall::{BoundaryPoint, WallCondition};
 use serde::{Deserialize, Serialize};
 
 /// How mass and momentum move between particles and the augmented grid (`augmented.transfer`).
@@ -23,26 +22,6 @@ pub enum AugmentedTransfer {
     /// The paper's: P2G with the MLS shape function φ (eq. (6)), G2P the fit of eq. (4), with
     /// augmpm's two safety nets, the low-mass floor and the hold of particles past a wall.
     Paper,
-}
-
-/// A point sampled on a wall, carrying the wall's outward normal(s).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct BoundaryPoint<const D: usize> {
-    /// Position (m).
-    pub x: Vector<D>,
-    /// Outward unit normals (into the wall); two at a corner, else `normals[1] == normals[0]`.
-    pub normals: [Vector<D>; 2],
-    /// Index of the wall it was sampled on.
-    pub wall: usize,
-    /// Velocity of the wall surface there (m/s); only its tangential part acts.
-    pub velocity: Vector<D>,
-}
-
-impl<const D: usize> BoundaryPoint<D> {
-    /// A point of a still wall.
-    pub fn new(x: Vector<D>, n0: Vector<D>, n1: Vector<D>, wall: usize) -> Self {
-        Self { x, normals: [n0, n1], wall, velocity: Vector::<D>::zeros() }
-    }
 }
 
 /// Most boundary points remembered per particle between the stages of a step;
@@ -538,8 +517,8 @@ impl<const D: usize> WallParticles<D> {
         x: &[Vector<D>],
     ) -> Result<u64, OutOfGrid> {
         use rayon::prelude::*;
-        let parallel = x.len() >= crate::schedule::PARALLEL_MIN;
-        let min_task = if parallel { crate::schedule::MIN_TASK } else { usize::MAX };
+        let parallel = x.len() >= crate::parallel::PARALLEL_MIN;
+        let min_task = if parallel { crate::parallel::MIN_TASK } else { usize::MAX };
         self.slot.resize(x.len(), Self::NONE);
         self.slot.par_iter_mut().zip(x.par_iter()).enumerate().with_min_len(min_task).try_for_each(
             |(p, (slot, xp))| {

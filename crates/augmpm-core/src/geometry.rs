@@ -3,8 +3,8 @@
 //! Distances are signed and positive on the wall side (outside the material);
 //! normals point from the material into the wall.
 
-use crate::augmented::BoundaryPoint;
 use crate::math::{Real, Vector};
+use crate::wall::BoundaryPoint;
 use nalgebra::Vector2;
 
 pub type Point = Vector2<Real>;

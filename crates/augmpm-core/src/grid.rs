@@ -123,6 +123,10 @@ impl<const D: usize> GridState<D> {
     }
 }
 
+/// Particle index whose stencil left the grid.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct OutOfGrid(pub usize);
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -6,6 +6,7 @@
 //! behind [`DimOps`], implemented for `Dim<2>` and `Dim<3>`.
 
 use nalgebra::{SMatrix, SVector};
+use serde::{Deserialize, Serialize};
 
 /// Floating-point type of the core: `f64`, or `f32` with the feature `f32` (the crate
 /// `augmpm-core-f32` compiles these same sources that way).
@@ -121,6 +122,20 @@ pub fn stencil_offset<const D: usize>(mut k: usize) -> [usize; D] {
         k /= 3;
     }
     o
+}
+
+/// Floating-point precision: `f64` (default) or `f32`, each an engine compiled from the same sources.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Precision {
+    F32,
+    #[default]
+    F64,
+}
+
+impl Precision {
+    /// The precision this engine is compiled with.
+    pub const NATIVE: Self = if std::mem::size_of::<Real>() == 4 { Precision::F32 } else { Precision::F64 };
 }
 
 #[cfg(test)]

@@ -2,13 +2,14 @@
 //! simulation is built from it: validation, walls, particle seeding.
 
 use crate::augmented::{AugmentedGrid, AugmentedTransfer};
-use crate::boundary::{Method, NaiveBoundary, WallCondition};
+use crate::boundary::{Method, NaiveBoundary};
 use crate::geometry::{Circle, Point, Polygon, Region, Side, SurfaceMotion, WallShape, Walls2};
 use crate::grid::GridLayout;
 use crate::material::Material;
-use crate::math::Real;
+use crate::math::{Precision, Real};
 use crate::particles::Particles;
 use crate::solver::{Boundary, Model, Simulation};
+use crate::wall::WallCondition;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use serde::{Deserialize, Serialize};
@@ -170,20 +171,6 @@ pub struct Scene {
     /// Floating-point precision of the engine that runs the scene.
     #[serde(default)]
     pub precision: Precision,
-}
-
-/// Floating-point precision: `f64` (default) or `f32`, each an engine compiled from the same sources.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Precision {
-    F32,
-    #[default]
-    F64,
-}
-
-impl Precision {
-    /// The precision this engine is compiled with.
-    pub const NATIVE: Self = if std::mem::size_of::<Real>() == 4 { Precision::F32 } else { Precision::F64 };
 }
 
 /// Settings of the augmented grid (`method = "augmented"`).

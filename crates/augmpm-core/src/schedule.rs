@@ -15,11 +15,10 @@
 //! The schedule also knows which node blocks the particles can touch (the active blocks), so
 //! the grid is cleared and updated only there.
 
-use crate::grid::GridLayout;
+use crate::grid::{GridLayout, OutOfGrid};
 use crate::math::{floor_i64, Real, Vector};
-use crate::transfer::OutOfGrid;
+use crate::parallel::{Disjoint, MIN_BLOCKS, MIN_TASK, PARALLEL_MIN};
 use rayon::prelude::*;
-use std::marker::PhantomData;
 
 /// Nodes per block edge (> 2 + 2·SLACK, see the module documentation).
 pub const BLOCK: usize = 8;
@@ -28,62 +27,8 @@ pub const SLACK: Real = 2.0;
 const _: () = assert!(BLOCK > 2 + 2 * SLACK as usize);
 /// Fixed number of particle chunks of the parallel counting sort (independent of the thread count).
 const CHUNKS: usize = 8;
-/// Below this many particles a step runs on one thread: the scatter's synchronisation would cost
-/// more than it saves.
-pub const PARALLEL_MIN: usize = 4096;
-/// Smallest piece of a per-particle loop handed to one thread.
-pub const MIN_TASK: usize = 2048;
-/// Smallest piece of a per-block loop handed to one thread (blocks of BLOCK^D nodes).
-pub const MIN_BLOCKS: usize = 128;
 /// Key of a particle whose stencil is not inside the grid.
 const OUT_OF_GRID: u32 = u32::MAX;
-
-/// A slice that several threads write at indices no two of them share.
-#[derive(Clone, Copy)]
-pub(crate) struct Disjoint<'a, T> {
-    ptr: *mut T,
-    len: usize,
-    _slice: PhantomData<&'a mut [T]>,
-}
-
-// SAFETY: `Disjoint` only hands out access through `update`, whose callers promise that no two
-// threads touch the same index; `T: Send` lets the values be written from another thread.
-unsafe impl<T: Send> Send for Disjoint<'_, T> {}
-unsafe impl<T: Send> Sync for Disjoint<'_, T> {}
-
-impl<'a, T> Disjoint<'a, T> {
-    pub(crate) fn new(slice: &'a mut [T]) -> Self {
-        Self { ptr: slice.as_mut_ptr(), len: slice.len(), _slice: PhantomData }
-    }
-
-    /// Applies `f` to element `i`.
-    ///
-    /// # Safety
-    /// No other thread may access element `i` while `self` is shared.
-    #[inline(always)]
-    pub(crate) unsafe fn update(&self, i: usize, f: impl FnOnce(&mut T)) {
-        assert!(i < self.len, "index {i} out of a slice of {}", self.len);
-        // SAFETY: in bounds (checked above); exclusive by the caller's promise.
-        f(unsafe { &mut *self.ptr.add(i) });
-    }
-
-    /// Length of the slice.
-    #[inline(always)]
-    pub(crate) fn len(&self) -> usize {
-        self.len
-    }
-
-    /// As [`Self::update`], without the bounds check.
-    ///
-    /// # Safety
-    /// `i < self.len()`, and no other thread may access element `i` while `self` is shared.
-    #[inline(always)]
-    pub(crate) unsafe fn update_unchecked(&self, i: usize, f: impl FnOnce(&mut T)) {
-        debug_assert!(i < self.len);
-        // SAFETY: the caller's promises.
-        f(unsafe { &mut *self.ptr.add(i) });
-    }
-}
 
 /// The stencil origins (grid coordinates, per axis `lo ..= hi`) a block's particles may have while
 /// the binning holds: the block's own nodes widened by [`SLACK`]. Scattering a particle outside it

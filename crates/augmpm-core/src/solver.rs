@@ -4,12 +4,14 @@
 use crate::augmented::{AugmentedGrid, WallParticles};
 use crate::boundary::NaiveBoundary;
 use crate::geometry::Region;
+use crate::grid::OutOfGrid;
 use crate::grid::{GridLayout, GridState};
 use crate::material::{ConstitutiveModel, Material};
 use crate::math::{Dim, DimOps, Real, Vector};
+use crate::parallel::Disjoint;
 use crate::particles::Particles;
-use crate::schedule::{Disjoint, Schedule};
-use crate::transfer::{self, GridDensity, OutOfGrid, Transfer};
+use crate::schedule::Schedule;
+use crate::transfer::{self, GridDensity, Transfer};
 use std::time::Instant;
 
 /// How the walls act on the grid: one of the two methods of [`crate::boundary::Method`].
@@ -108,7 +110,7 @@ fn likely_cause(dt: Real, stable_dt: Real) -> String {
              {stable_dt:e} s, but a velocity v needs dt < h / v); lower time.dt"
         )
     };
-    if crate::scene::Precision::NATIVE == crate::scene::Precision::F32 {
+    if crate::math::Precision::NATIVE == crate::math::Precision::F32 {
         cause + "; or the f32 rounding near walls: precision = \"f64\" is the robust choice"
     } else {
         cause

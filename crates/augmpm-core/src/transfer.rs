@@ -12,13 +12,10 @@ use crate::grid::{GridLayout, GridState};
 use crate::kernel::Stencil;
 use crate::material::{ConstitutiveModel, Material, MaterialPoint};
 use crate::math::{Dim, DimOps, Matrix, Real, Vector};
+use crate::parallel::{Disjoint, MIN_BLOCKS, MIN_TASK};
 use crate::particles::Particles;
-use crate::schedule::{stencil_in_grid, Disjoint, Schedule, MIN_BLOCKS, MIN_TASK};
+use crate::schedule::{stencil_in_grid, Schedule};
 use rayon::prelude::*;
-
-/// Particle index whose stencil left the grid.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct OutOfGrid(pub usize);
 
 /// Scatters particle masses to the regular grid with the B-spline weights (never an augmented
 /// grid: density has no boundary condition). `grid_mass` must be zero on the schedule's active

@@ -10,10 +10,10 @@
 //! weighted norm (`Σ w |u(x_i)|²` over the grid points) below that of the grid data when their
 //! targets are zero: the transfer stays energy-stable.
 
-use crate::boundary::WallCondition;
 use crate::geometry::{WallFeet, MAX_FEET};
 use crate::kernel::{bspline, MlsInverse};
 use crate::math::{Matrix, Real, Vector};
+use crate::wall::WallCondition;
 
 /// Most wall terms of one particle: every foot, each with up to three rows (sticky in 3D).
 const MAX_ROWS: usize = MAX_FEET * 3;

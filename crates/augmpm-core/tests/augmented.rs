@@ -2,11 +2,11 @@
 //! which the naive grid (wall nodes holding the wall value) cannot.
 
 use augmpm_core::augmented::AugmentedGrid;
-use augmpm_core::boundary::WallCondition;
 use augmpm_core::geometry::{Point, Polygon, Region, WallShape, Walls2};
 use augmpm_core::grid::GridLayout;
 use augmpm_core::kernel::{MlsKind, Stencil};
 use augmpm_core::math::Dim;
+use augmpm_core::wall::WallCondition;
 use proptest::prelude::*;
 
 /// A container in the unit box whose floor rises at `angle` (rad) to the grid from (0.05, y0).

@@ -4,7 +4,6 @@
 //! Derivation: docs/stable_transfer.md.
 
 use augmpm_core::augmented::{AugmentedGrid, AugmentedTransfer, WallParticles};
-use augmpm_core::boundary::WallCondition;
 use augmpm_core::geometry::{Point, Polygon, Region, WallDistance, WallShape, Walls2};
 use augmpm_core::grid::{GridLayout, GridState};
 use augmpm_core::material::{DensityEstimate, Material, WeaklyCompressibleFluid};
@@ -12,6 +11,7 @@ use augmpm_core::math::{Dim, Real};
 use augmpm_core::particles::Particles;
 use augmpm_core::schedule::Schedule;
 use augmpm_core::transfer::{g2p, grid_velocity, p2g, Transfer};
+use augmpm_core::wall::WallCondition;
 use nalgebra::{Matrix2, Vector2};
 use proptest::prelude::*;
 

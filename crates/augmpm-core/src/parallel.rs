@@ -1,0 +1,59 @@
+//! Sharing work between threads: below which sizes a loop stays on one thread, and [`Disjoint`], the
+//! slice that threads write at indices no two of them share (the schedule's colouring guarantees it).
+
+use std::marker::PhantomData;
+
+/// Below this many particles a step runs on one thread: the scatter's synchronisation would cost
+/// more than it saves.
+pub const PARALLEL_MIN: usize = 4096;
+/// Smallest piece of a per-particle loop handed to one thread.
+pub const MIN_TASK: usize = 2048;
+/// Smallest piece of a per-block loop handed to one thread (blocks of BLOCK^D nodes).
+pub const MIN_BLOCKS: usize = 128;
+
+/// A slice that several threads write at indices no two of them share.
+#[derive(Clone, Copy)]
+pub(crate) struct Disjoint<'a, T> {
+    ptr: *mut T,
+    len: usize,
+    _slice: PhantomData<&'a mut [T]>,
+}
+
+// SAFETY: `Disjoint` only hands out access through `update`, whose callers promise that no two
+// threads touch the same index; `T: Send` lets the values be written from another thread.
+unsafe impl<T: Send> Send for Disjoint<'_, T> {}
+unsafe impl<T: Send> Sync for Disjoint<'_, T> {}
+
+impl<'a, T> Disjoint<'a, T> {
+    pub(crate) fn new(slice: &'a mut [T]) -> Self {
+        Self { ptr: slice.as_mut_ptr(), len: slice.len(), _slice: PhantomData }
+    }
+
+    /// Applies `f` to element `i`.
+    ///
+    /// # Safety
+    /// No other thread may access element `i` while `self` is shared.
+    #[inline(always)]
+    pub(crate) unsafe fn update(&self, i: usize, f: impl FnOnce(&mut T)) {
+        assert!(i < self.len, "index {i} out of a slice of {}", self.len);
+        // SAFETY: in bounds (checked above); exclusive by the caller's promise.
+        f(unsafe { &mut *self.ptr.add(i) });
+    }
+
+    /// Length of the slice.
+    #[inline(always)]
+    pub(crate) fn len(&self) -> usize {
+        self.len
+    }
+
+    /// As [`Self::update`], without the bounds check.
+    ///
+    /// # Safety
+    /// `i < self.len()`, and no other thread may access element `i` while `self` is shared.
+    #[inline(always)]
+    pub(crate) unsafe fn update_unchecked(&self, i: usize, f: impl FnOnce(&mut T)) {
+        debug_assert!(i < self.len);
+        // SAFETY: the caller's promises.
+        f(unsafe { &mut *self.ptr.add(i) });
+    }
+}
