@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 import augmpm
@@ -36,6 +37,13 @@ BAD = [
         [[0.1, 0.1], [0.9, 0.9], [0.9, 0.1], [0.1, 0.9]],
         "walls[0].vertices",
         "self-intersecting",
+    ),
+    (
+        "repeated vertex",
+        "walls.0.vertices",
+        [[0.05, 0.05], [0.95, 0.05], [0.95, 0.05], [0.95, 0.95], [0.05, 0.95]],
+        "walls[0].vertices",
+        "vertices 1 and 2 are the same point",
     ),
     (
         "clockwise wall",
@@ -84,6 +92,17 @@ def test_bad_scene_exits_2(small_scene, write_scene, tmp_path, capsys, what, pat
     err = capsys.readouterr().err
     assert key in err and reason in err
     assert not (out / "metrics.csv").exists()
+
+
+def test_a_polygon_closed_by_repeating_its_first_vertex_is_accepted(small_scene):
+    """A wall polygon that ends on its first vertex (closed, as many tools write polygons) builds and runs the
+    same simulation as without the repeat, bit for bit."""
+    vertices = small_scene["walls"][0]["vertices"]
+    closed = _mutate(small_scene, "walls.0.vertices", [*vertices, vertices[0]])
+    runs = [augmpm.Simulation(augmpm.Scene.from_dict(s), "augmented") for s in (small_scene, closed)]
+    for sim in runs:
+        sim.step(5)
+    assert np.array_equal(runs[0].positions, runs[1].positions)
 
 
 def test_unreadable_inputs_exit_2(tmp_path, capsys, write_scene, small_scene):

@@ -95,6 +95,60 @@ const TILT_MAX: Real = 4.0;
 /// hydrostatic column with the grid density, run at 0.4 of its stable step, blew up; at 1/33 it ran.)
 const TILT_SPREAD: Real = 0.04;
 
+/// Most grid points of one particle: its whole stencil and [`MAX_NEAR`] boundary points.
+const MAX_POINTS: usize = crate::math::stencil_len(3) + MAX_NEAR;
+
+/// The [`Tilt`] of a particle whose grid points have B-spline weights and offsets `points` (m), summing
+/// to `total`: η minimises the convex F(η) = log Σ w exp(η·d), whose gradient is the reweighted first
+/// moment and whose Hessian its covariance, by Newton's method in units of h (`inv_h` = 1/h), with steps
+/// of at most 1/h, within the limits [`TILT_MAX`] and [`TILT_SPREAD`].
+fn centred_tilt<const D: usize, Ops: DimOps<D>>(points: &[(Real, Vector<D>)], inv_h: Real, total: Real) -> Tilt<D> {
+    let tolerance = 100.0 * Real::EPSILON;
+    let moments = |mu: &Vector<D>| {
+        let mut m = Moments::new();
+        let tilted = *mu != Vector::<D>::zeros();
+        for (w, d) in points {
+            let e = d * inv_h;
+            m.add(if tilted { w * mu.dot(&e).exp() } else { *w }, &e);
+        }
+        let mean = m.b / m.a;
+        (m.a, mean, m.c / m.a - mean * mean.transpose())
+    };
+    let mut mu = Vector::<D>::zeros();
+    let (mut sum, mut mean, mut cov) = moments(&mu);
+    if sum <= 0.0 {
+        return Tilt::none();
+    }
+    // The weights' spread normal to a wall shrinks as they concentrate on it, and the MLS gradient
+    // (and the stress it carries) stiffens as its inverse: the tilt keeps it above the floor.
+    let floor = Ops::min_sym_eigenvalue(&cov).min(TILT_SPREAD);
+    for _ in 0..TILT_ITERATIONS {
+        if mean.norm() <= tolerance {
+            break;
+        }
+        let Some(inverse) = Ops::inverse(&cov) else { break };
+        let mut step = -(inverse * mean);
+        step /= step.norm().max(1.0);
+        let mut accepted = false;
+        for _ in 0..4 {
+            let mut trial = mu + step;
+            if trial.norm() > TILT_MAX {
+                trial *= TILT_MAX / trial.norm();
+            }
+            let (sum_t, mean_t, cov_t) = moments(&trial);
+            if Ops::min_sym_eigenvalue(&cov_t) >= floor {
+                (mu, sum, mean, cov, accepted) = (trial, sum_t, mean_t, cov_t, true);
+                break;
+            }
+            step *= 0.5;
+        }
+        if !accepted || mu.norm() >= TILT_MAX {
+            break;
+        }
+    }
+    Tilt { eta: mu * inv_h, scale: total / sum }
+}
+
 /// Regular nodes kept for interpolation, the boundary points, a per-cell
 /// index of the boundary points, and which stencils can use the closed form.
 #[derive(Clone, Debug)]
@@ -360,86 +414,44 @@ impl<const D: usize> AugmentedGrid<D> {
 
     /// As [`Self::general_inverse`] with the points' weights reweighted by the particle's [`Tilt`]
     /// (the stable transfer's), which it also returns; Σw is the sum of the B-spline weights, which
-    /// the tilt keeps.
+    /// the tilt keeps. A particle that sees more than [`MAX_NEAR`] boundary points keeps its B-spline
+    /// weights (still positive, so the transfer stays energy-stable).
     pub fn stable_inverse<Ops: DimOps<D>>(
         &self,
         layout: &GridLayout<D>,
         x: &Vector<D>,
         p: usize,
     ) -> Result<(MlsInverse<D>, MlsKind, NearPoints, Real, Tilt<D>), OutOfGrid> {
+        // The particle's points (B-spline weight, offset), gathered once for the Newton iterations.
+        let mut points = [(0.0, Vector::<D>::zeros()); MAX_POINTS];
+        let mut len = 0;
         let mut total = 0.0;
-        self.for_each_node(layout, x, p, &mut |_, w, _| total += w)?;
-        let mut near = NearPoints::NONE;
-        self.scan_points(layout, x, |b, w, _| {
+        let mut keep = |w: Real, d: Vector<D>| {
             total += w;
+            if len < MAX_POINTS {
+                points[len] = (w, d);
+                len += 1;
+            }
+        };
+        self.for_each_node(layout, x, p, &mut |_, w, d| keep(w, d))?;
+        let mut near = NearPoints::NONE;
+        self.scan_points(layout, x, |b, w, d| {
+            keep(w, d);
             near.push(b);
         });
-        let tilt = self.moment_free_tilt::<Ops>(layout, x, &near, total);
+        let tilt = if near.len == NearPoints::OVERFLOW {
+            Tilt::none()
+        } else {
+            centred_tilt::<D, Ops>(&points[..len], 1.0 / layout.h, total)
+        };
         let mut m = Moments::new();
-        self.for_each_near(layout, x, &near, |_, w, d| m.add(tilt.weight(w, &d), &d));
+        if near.len == NearPoints::OVERFLOW {
+            self.for_each_near(layout, x, &near, |_, w, d| m.add(w, &d));
+        } else {
+            points[..len].iter().for_each(|(w, d)| m.add(tilt.weight(*w, d), d));
+        }
         let (minv, kind) = MlsInverse::from_moments::<Ops>(&m, layout.h);
         Ok((minv, kind, near, total, tilt))
-    }
-
-    /// The [`Tilt`] of a particle at `x` whose grid points' B-spline weights sum to `total`: η minimises
-    /// the convex F(η) = log Σ w exp(η·d), whose gradient is the reweighted first moment, by Newton's
-    /// method (its Hessian is the reweighted covariance of d), in units of h, with steps of at most 1/h.
-    fn moment_free_tilt<Ops: DimOps<D>>(
-        &self,
-        layout: &GridLayout<D>,
-        x: &Vector<D>,
-        near: &NearPoints,
-        total: Real,
-    ) -> Tilt<D> {
-        let inv_h = 1.0 / layout.h;
-        let tolerance = 100.0 * Real::EPSILON;
-        let moments = |mu: &Vector<D>| {
-            let mut m = Moments::new();
-            self.for_each_near(layout, x, near, |_, w, d| {
-                let e = d * inv_h;
-                m.add(w * mu.dot(&e).exp(), &e);
-            });
-            m
-        };
-        let covariance = |m: &Moments<D>| {
-            let mean = m.b / m.a;
-            (mean, m.c / m.a - mean * mean.transpose())
-        };
-        let mut mu = Vector::<D>::zeros();
-        let mut m = moments(&mu);
-        if m.a <= 0.0 {
-            return Tilt::none();
-        }
-        let (mut mean, mut cov) = covariance(&m);
-        // The weights' spread normal to a wall shrinks as they concentrate on it, and the MLS gradient
-        // (and the stress it carries) stiffens as its inverse: the tilt keeps it above the floor.
-        let floor = Ops::min_sym_eigenvalue(&cov).min(TILT_SPREAD);
-        for _ in 0..TILT_ITERATIONS {
-            if mean.norm() <= tolerance {
-                break;
-            }
-            let Some(inverse) = Ops::inverse(&cov) else { break };
-            let mut step = -(inverse * mean);
-            step /= step.norm().max(1.0);
-            let mut accepted = false;
-            for _ in 0..4 {
-                let mut trial = mu + step;
-                if trial.norm() > TILT_MAX {
-                    trial *= TILT_MAX / trial.norm();
-                }
-                let mt = moments(&trial);
-                let (mean_t, cov_t) = covariance(&mt);
-                if Ops::min_sym_eigenvalue(&cov_t) >= floor {
-                    (mu, m, mean, cov, accepted) = (trial, mt, mean_t, cov_t, true);
-                    break;
-                }
-                step *= 0.5;
-            }
-            if !accepted || mu.norm() >= TILT_MAX {
-                break;
-            }
-        }
-        Tilt { eta: mu * inv_h, scale: total / m.a }
     }
 
     /// MLS reconstruction (eq. (4)) at `x` of a scalar field given at the grid points

@@ -261,13 +261,29 @@ fn finite(key: &str, values: &[Real]) -> Result<(), SceneError> {
     }
 }
 
-/// Checks a wall or body polygon: ≥ 3 finite vertices, counter-clockwise, simple.
-fn checked_polygon(key: &str, vertices: Vec<Point>) -> Result<Polygon, SceneError> {
+/// Checks a wall or body polygon: ≥ 3 finite vertices, each visited once, counter-clockwise, simple.
+/// A polygon closed by repeating its first vertex at the end is accepted without the repeat.
+fn checked_polygon(key: &str, mut vertices: Vec<Point>) -> Result<Polygon, SceneError> {
+    if vertices.len() > 3 && vertices.first() == vertices.last() {
+        vertices.pop();
+    }
     if vertices.len() < 3 {
         return Err(SceneError::new(key, format!("a polygon needs at least 3 vertices, got {}", vertices.len())));
     }
     for v in &vertices {
         finite(key, v.as_slice())?;
+    }
+    for (i, a) in vertices.iter().enumerate() {
+        if let Some(j) = vertices[i + 1..].iter().position(|b| b == a) {
+            let j = i + 1 + j;
+            return Err(SceneError::new(
+                key,
+                format!(
+                    "vertices {i} and {j} are the same point ({}, {}): a polygon visits each vertex once",
+                    a.x, a.y
+                ),
+            ));
+        }
     }
     let poly = Polygon::new(vertices);
     if let Some((i, j)) = poly.self_intersection() {
