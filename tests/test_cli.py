@@ -82,3 +82,25 @@ def test_rerun_into_the_same_directory_replaces_frames(small_scene, write_scene,
     assert len(list((out / "particles").glob("*.npz"))) == 3
     assert len(list((out / "frames").glob("*.png"))) == 3
     assert len(list((out / "vtk").glob("*.vtp"))) == 3
+
+
+def test_the_method_is_a_scene_key_augmented_by_default(small_scene, write_scene, tmp_path):
+    """`method` is a scene key ("augmented" unless the scene says otherwise), `--set method=...` sets it and
+    `--method` overrides it; the run directory's resolved scene records the method that ran."""
+    path = write_scene(small_scene)
+
+    def ran(*args: str) -> str:
+        out = tmp_path / f"run{len(list(tmp_path.iterdir()))}"
+        assert main(["run", str(path), "--out", str(out), "--steps", "2", "--no-render", "--no-progress", *args]) == 0
+        resolved = (out / "scene.toml").read_text()
+        header = resolved.splitlines()[0]
+        assert f'method = "{header.split("method = ")[1].split(",")[0]}"' in resolved
+        return header.split("method = ")[1].split(",")[0]
+
+    assert ran() == "augmented"
+    assert ran("--set", "method=naive") == "naive"
+    assert ran("--set", "method=naive", "--method", "augmented") == "augmented"
+    assert ran("--method", "naive") == "naive"
+    assert augmpm.Simulation(augmpm.Scene.from_dict(small_scene)).method == "augmented"
+    sim = augmpm.Simulation(augmpm.Scene.from_dict(small_scene), "naive")
+    assert (sim.method, sim.scene.method) == ("naive", "naive")

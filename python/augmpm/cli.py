@@ -47,7 +47,9 @@ def _parser() -> argparse.ArgumentParser:
     )
     r.add_argument("--out", type=Path, help="output directory (default: runs/<scene name>)")
     r.add_argument("--steps", type=int, help="number of steps (default: the scene's time.steps)")
-    r.add_argument("--method", choices=["naive", "augmented"], help="wall boundary method (default: naive)")
+    r.add_argument(
+        "--method", choices=["naive", "augmented"], help="wall boundary method (default: the scene's method key)"
+    )
     r.add_argument(
         "--set",
         dest="overrides",
@@ -128,7 +130,7 @@ def _run(args: argparse.Namespace) -> int:
         result = run_scene(
             scene,
             out,
-            method=args.method or "naive",
+            method=args.method,
             steps=args.steps,
             progress=not args.no_progress,
             animation=None if args.no_render else ("gif" if args.gif else "mp4"),

@@ -70,7 +70,7 @@ class RunResult:
 def run_scene(
     scene: Scene,
     out: str | Path,
-    method: Method = "naive",
+    method: Method | None = None,
     steps: int | None = None,
     progress: bool = True,
     animation: str | None = "mp4",
@@ -88,6 +88,7 @@ def run_scene(
     out = Path(out)
     _check_every(checkpoint_every)
     sim = Simulation(scene, method, threads=threads)
+    scene, method = sim.scene, sim.method
     total = scene.time.steps if steps is None else steps
     out.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(out)

@@ -39,6 +39,7 @@ PositiveFloat = Annotated[float, _NUMBER, Field(gt=0, allow_inf_nan=False)]
 FiniteFloat = Annotated[float, _NUMBER, Field(allow_inf_nan=False)]
 FiniteVec2 = tuple[FiniteFloat, FiniteFloat]
 WallCondition = Literal["sticky", "slip", "separate"]
+Method = Literal["naive", "augmented"]
 
 
 class _Strict(BaseModel):
@@ -224,6 +225,9 @@ class Scene(_Strict):
     gravity: FiniteVec2 = (0.0, -9.81)
     grid: Grid
     time: Time
+    #: How walls act on the grid: "augmented" (default: the paper's augmented grid) or "naive" (grid nodes on
+    #: the wall side take the wall's condition). ``Simulation(scene, method)`` and ``--method`` override it.
+    method: Method = "augmented"
     wall_condition: WallCondition = "sticky"
     walls: list[Wall] = Field(default_factory=list)
     bodies: Annotated[list[Body], Field(min_length=1)]

@@ -5,14 +5,12 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
 from augmpm import _core
-from augmpm.scene import Scene, _plain_error, load_scene
-
-Method = Literal["naive", "augmented"]
+from augmpm.scene import Method, Scene, _plain_error, load_scene
 
 
 class Simulation:
@@ -23,13 +21,17 @@ class Simulation:
     >>> sim.positions.shape  # (N, 2), metres
     """
 
-    def __init__(self, scene: Scene | str | Path, method: Method = "naive", threads: int | None = None) -> None:
+    def __init__(self, scene: Scene | str | Path, method: Method | None = None, threads: int | None = None) -> None:
         if not isinstance(scene, (Scene, str, Path)):
             raise _plain_error("scene", f"must be a Scene or the path of a scene file, got {type(scene).__name__}")
         if not isinstance(scene, Scene):
             scene = load_scene(scene)
+        if method is None:
+            method = scene.method
         if method not in ("naive", "augmented"):
             raise _plain_error("method", f'must be "naive" or "augmented", got {method!r}')
+        if method != scene.method:
+            scene = scene.model_copy(update={"method": method})
         self.scene = scene
         self.method = method
         self._sim = _core.Simulation(scene.to_json(), method, resolve_threads(threads), memory_limit())

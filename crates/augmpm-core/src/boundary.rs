@@ -66,13 +66,13 @@ impl<const D: usize> NaiveBoundary<D> {
     }
 }
 
-/// How walls act on the grid, chosen by name (`method` in the API and CLI).
+/// How walls act on the grid, chosen by name (`method` in scenes, the API and the CLI).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Method {
     /// Grid-node projection on the regular grid (the baseline of the paper).
-    #[default]
     Naive,
-    /// Augmented grid points on the walls (Toyota & Umetani 2024).
+    /// Augmented grid points on the walls (Toyota & Umetani 2024): the default.
+    #[default]
     Augmented,
 }

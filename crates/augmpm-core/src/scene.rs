@@ -159,6 +159,10 @@ pub struct Scene {
     pub gravity: [Real; 2],
     pub grid: GridSpec,
     pub time: TimeSpec,
+    /// How walls act on the grid: `augmented` (default) or `naive`. The method given to
+    /// [`Scene::build`] is the one that runs; front ends pass this one unless told otherwise.
+    #[serde(default)]
+    pub method: Method,
     /// Condition of every wall (and the domain box) unless a wall names its own.
     #[serde(default)]
     pub wall_condition: WallCondition,
