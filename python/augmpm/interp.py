@@ -18,7 +18,7 @@ import numpy as np
 from augmpm import _core
 from augmpm.files import save_png, write_text
 
-# shared/spec/paper-scenes.md, "Fig. 4: interpolation test".
+# docs/paper_scenes.md, "Fig. 4: interpolation".
 FIG4_POLYGON = [[0.059, 0.5], [0.941, 0.059], [0.941, 0.941], [0.059, 0.941]]
 
 
