@@ -99,11 +99,17 @@ const TILT_SPREAD: Real = 0.04;
 const MAX_POINTS: usize = crate::math::stencil_len(3) + MAX_NEAR;
 
 /// The [`Tilt`] of a particle whose grid points have B-spline weights and offsets `points` (m), summing
-/// to `total`: η minimises the convex F(η) = log Σ w exp(η·d), whose gradient is the reweighted first
-/// moment and whose Hessian its covariance, by Newton's method in units of h (`inv_h` = 1/h), with steps
-/// of at most 1/h, within the limits [`TILT_MAX`] and [`TILT_SPREAD`].
-fn centred_tilt<const D: usize, Ops: DimOps<D>>(points: &[(Real, Vector<D>)], inv_h: Real, total: Real) -> Tilt<D> {
+/// to `total`, and the moments (eq. (5)) of the reweighted points: η minimises the convex
+/// F(η) = log Σ w exp(η·d), whose gradient is the reweighted first moment and whose Hessian its
+/// covariance, by Newton's method in units of h (`inv_h` = 1/h), with steps of at most 1/h, within the
+/// limits [`TILT_MAX`] and [`TILT_SPREAD`]. The last iterate's moments are the MLS system's.
+fn centred_tilt<const D: usize, Ops: DimOps<D>>(
+    points: &[(Real, Vector<D>)],
+    inv_h: Real,
+    total: Real,
+) -> (Tilt<D>, Moments<D>) {
     let tolerance = 100.0 * Real::EPSILON;
+    // The reweighted moments in units of h, their mean and covariance.
     let moments = |mu: &Vector<D>| {
         let mut m = Moments::new();
         let tilted = *mu != Vector::<D>::zeros();
@@ -112,12 +118,12 @@ fn centred_tilt<const D: usize, Ops: DimOps<D>>(points: &[(Real, Vector<D>)], in
             m.add(if tilted { w * mu.dot(&e).exp() } else { *w }, &e);
         }
         let mean = m.b / m.a;
-        (m.a, mean, m.c / m.a - mean * mean.transpose())
+        (m, mean, m.c / m.a - mean * mean.transpose())
     };
     let mut mu = Vector::<D>::zeros();
-    let (mut sum, mut mean, mut cov) = moments(&mu);
-    if sum <= 0.0 {
-        return Tilt::none();
+    let (mut m, mut mean, mut cov) = moments(&mu);
+    if m.a <= 0.0 {
+        return (Tilt::none(), Moments::new());
     }
     // The weights' spread normal to a wall shrinks as they concentrate on it, and the MLS gradient
     // (and the stress it carries) stiffens as its inverse: the tilt keeps it above the floor.
@@ -135,9 +141,9 @@ fn centred_tilt<const D: usize, Ops: DimOps<D>>(points: &[(Real, Vector<D>)], in
             if trial.norm() > TILT_MAX {
                 trial *= TILT_MAX / trial.norm();
             }
-            let (sum_t, mean_t, cov_t) = moments(&trial);
+            let (m_t, mean_t, cov_t) = moments(&trial);
             if Ops::min_sym_eigenvalue(&cov_t) >= floor {
-                (mu, sum, mean, cov, accepted) = (trial, sum_t, mean_t, cov_t, true);
+                (mu, m, mean, cov, accepted) = (trial, m_t, mean_t, cov_t, true);
                 break;
             }
             step *= 0.5;
@@ -146,7 +152,10 @@ fn centred_tilt<const D: usize, Ops: DimOps<D>>(points: &[(Real, Vector<D>)], in
             break;
         }
     }
-    Tilt { eta: mu * inv_h, scale: total / sum }
+    let scale = total / m.a;
+    let h = 1.0 / inv_h;
+    let metres = Moments { a: total, b: m.b * (scale * h), c: m.c * (scale * h * h) };
+    (Tilt { eta: mu * inv_h, scale }, metres)
 }
 
 /// Regular nodes kept for interpolation, the boundary points, a per-cell
@@ -439,17 +448,13 @@ impl<const D: usize> AugmentedGrid<D> {
             keep(w, d);
             near.push(b);
         });
-        let tilt = if near.len == NearPoints::OVERFLOW {
-            Tilt::none()
+        let (tilt, m) = if near.len == NearPoints::OVERFLOW {
+            let mut m = Moments::new();
+            self.for_each_near(layout, x, &near, |_, w, d| m.add(w, &d));
+            (Tilt::none(), m)
         } else {
             centred_tilt::<D, Ops>(&points[..len], 1.0 / layout.h, total)
         };
-        let mut m = Moments::new();
-        if near.len == NearPoints::OVERFLOW {
-            self.for_each_near(layout, x, &near, |_, w, d| m.add(w, &d));
-        } else {
-            points[..len].iter().for_each(|(w, d)| m.add(tilt.weight(*w, d), d));
-        }
         let (minv, kind) = MlsInverse::from_moments::<Ops>(&m, layout.h);
         Ok((minv, kind, near, total, tilt))
     }
