@@ -47,8 +47,9 @@ def test_compare_writes_both_runs_and_the_comparison(tmp_path, capsys):
     assert main(["compare", str(scene), "--out", str(out), "--steps", "200", "--no-progress"]) == 0
     printed = capsys.readouterr().out
     assert "naive" in printed and "augmented" in printed and "outside" in printed
-    for m in ("naive", "augmented"):
+    for m in ("naive", "augmented"):  # each a full run directory, its animation included
         assert (out / m / "metrics.csv").exists() and (out / m / "particles.pvd").exists()
+        assert (out / m / "animation.mp4").stat().st_size > 1000
     with open(out / "comparison.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert list(rows[0]) == [

@@ -8,6 +8,7 @@ import sys
 import xml.etree.ElementTree as ET
 
 import numpy as np
+import pytest
 
 import augmpm
 from augmpm.cli import main
@@ -61,6 +62,40 @@ def test_failed_run_exits_1_and_keeps_frames(small_scene, write_scene, tmp_path,
         rows = list(csv.DictReader(fh))
     assert len(frames) == len(rows) >= 1
     assert all(np.isfinite(np.load(f)["x"]).all() for f in frames)
+
+
+def test_run_scene_raises_a_failed_run_and_keeps_its_frames(small_scene, tmp_path):
+    """`augmpm.run_scene` raises SimulationError for a failed run (the step in `.step`, the run's result with
+    its frame count in `.result`) after writing every frame before the failure; `raise_on_failure=False`
+    returns that result instead, its `error` saying why."""
+    small_scene["time"].update(dt=0.2, steps=400, output_interval=1)
+    small_scene["bodies"][0]["material"]["youngs_modulus"] = 1e9
+    scene = augmpm.Scene.from_dict(small_scene)
+    with pytest.raises(augmpm.SimulationError) as err:
+        augmpm.run_scene(scene, tmp_path / "a", progress=False, render=False)
+    result = err.value.result
+    assert result.error == str(err.value) and err.value.step > 0
+    assert result.frames == len(list((tmp_path / "a" / "particles").glob("*.npz"))) >= 1
+    quiet = augmpm.run_scene(scene, tmp_path / "b", progress=False, render=False, raise_on_failure=False)
+    assert quiet.error == result.error and quiet.frames == result.frames
+
+
+def test_an_output_path_that_is_a_file_is_bad_input(small_scene, tmp_path):
+    """Outputs into a path that is a file (or cannot be created) raise SceneError naming `out`, not an OSError."""
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    scene = augmpm.Scene.from_dict(small_scene)
+    for out in (blocker, blocker / "below"):
+        with pytest.raises(augmpm.SceneError) as err:
+            augmpm.run_scene(scene, out, progress=False, render=False)
+        assert err.value.key == "out", str(err.value)
+
+
+def test_progress_bars_name_the_scene_and_method(small_scene, tmp_path, capsys):
+    """A run's progress bar says which scene and method it is (compare shows two, one per method)."""
+    small_scene["name"] = "ball"
+    augmpm.run_scene(augmpm.Scene.from_dict(small_scene), tmp_path, method="naive", render=False)
+    assert "ball (naive)" in capsys.readouterr().err
 
 
 def test_console_script_is_installed(small_scene, write_scene, tmp_path):

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import os
 import random
+import re
 import signal
 import subprocess
 import sys
@@ -145,9 +146,13 @@ def test_memory_refused_before_allocating(small_scene, monkeypatch):
     monkeypatch.setenv("AUGMPM_MEMORY_LIMIT", "1M")
     with pytest.raises(augmpm.SceneError) as err:
         augmpm.Simulation(scene)
-    # 0.09 m² at 400 particles per cell of (1/16 m)² is 9,216 particles of 176 B: 1.6 MiB.
+    # 0.09 m² at 400 particles per cell of (1/16 m)² is 9,216 particles of 176 B: 1.5 MiB, against 1.0 MiB.
     assert err.value.key == "bodies[0].seeding"
-    assert "about 2 MiB (9216 particles" in str(err.value)
+    assert re.search(r"about 1\.\d MiB \(9216 particles, \d+ grid nodes\) but only 1\.0 MiB", str(err.value))
+    # Sizes keep their unit: a limit below a MiB is not rounded up to one.
+    monkeypatch.setenv("AUGMPM_MEMORY_LIMIT", "100K")
+    with pytest.raises(augmpm.SceneError, match=r"but only 100\.0 KiB of memory"):
+        augmpm.Simulation(scene)
     monkeypatch.setenv("AUGMPM_MEMORY_LIMIT", "lots")
     with pytest.raises(augmpm.SceneError) as err:
         augmpm.Simulation(scene)

@@ -56,7 +56,7 @@ def _parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="override a scene value, e.g. --set time.steps=200 --set bodies[0].material.viscosity=10",
+        help="override a scene value, e.g. --set time.steps=200 --set bodies[0].material.viscosity=10; KEY= removes it",
     )
     r.add_argument("--gif", action="store_true", help="write animation.gif instead of animation.mp4")
     r.add_argument("--no-render", action="store_true", help="skip PNG frames and the animation")
@@ -118,7 +118,11 @@ def _run(args: argparse.Namespace) -> int:
             )
         out = args.resume
         result = resume_run(
-            out, progress=not args.no_progress, threads=args.threads, checkpoint_every=args.checkpoint_every
+            out,
+            progress=not args.no_progress,
+            threads=args.threads,
+            checkpoint_every=args.checkpoint_every,
+            raise_on_failure=False,
         )
     else:
         if args.scene is None:
@@ -137,6 +141,7 @@ def _run(args: argparse.Namespace) -> int:
             render=not args.no_render,
             threads=args.threads,
             checkpoint_every=CHECKPOINT_EVERY if args.checkpoint_every is None else args.checkpoint_every,
+            raise_on_failure=False,
         )
     for w in result.warnings:
         print(f"augmpm: warning: {w}", file=sys.stderr)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from augmpm.files import atomic_write
+from augmpm.files import atomic_write, output_dir
 from augmpm.render import write_animation
 from augmpm.run import RunResult, run_scene
 from augmpm.scene import Scene
@@ -53,9 +53,18 @@ def compare_scene(
 ) -> Comparison:
     """Runs `scene` with both methods into `out/naive` and `out/augmented` and writes
     `comparison.csv`, `comparison.png` (both methods over time) and a side-by-side animation."""
-    out = Path(out)
+    out = output_dir(out)
     runs = {
-        m: run_scene(scene, out / m, method=m, steps=steps, progress=progress, animation=None, threads=threads)
+        m: run_scene(
+            scene,
+            out / m,
+            method=m,
+            steps=steps,
+            progress=progress,
+            animation=animation,
+            threads=threads,
+            raise_on_failure=False,
+        )
         for m in METHODS
     }
     metrics = {m: _read_metrics(out / m / "metrics.csv") for m in METHODS}

@@ -25,6 +25,25 @@ import numpy as np
 TMP_MARK = ".tmp-"
 
 
+def output_dir(path: str | Path, key: str = "out") -> Path:
+    """Creates the directory ``path`` (and its parents) for a run's outputs; a path that is a file, or
+    that cannot be created, is bad input: :class:`augmpm.SceneError` naming ``key``."""
+    from augmpm._core import SceneError
+
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        reason = f"{path} exists and is not a directory"
+    else:
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+            return path
+        except OSError as e:
+            reason = f"cannot create {path} ({e.strerror})"
+    err = SceneError(f"{key}: {reason}")
+    err.key, err.reason = key, reason
+    raise err
+
+
 @contextlib.contextmanager
 def atomic_write(
     path: str | Path, mode: str = "wb", encoding: str | None = None, durable: bool = False

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from augmpm import _core
-from augmpm.files import save_png, write_text
+from augmpm.files import output_dir, save_png, write_text
 
 # docs/paper_scenes.md, "Fig. 4: interpolation".
 FIG4_POLYGON = [[0.059, 0.5], [0.941, 0.059], [0.941, 0.941], [0.059, 0.941]]
@@ -91,7 +91,7 @@ def interpolation_test(out: Path, resolution: int = 30, pixels: int = 300) -> li
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_dir(out)
     results, images = [], {}
     for method in ("naive", "augmented"):
         r, img = near_wall_errors(method, resolution, pixels)

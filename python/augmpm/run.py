@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from augmpm import _core
-from augmpm.files import npz_bytes, remove_stale_temporaries, write_bytes, write_npz, write_text
+from augmpm.files import npz_bytes, output_dir, remove_stale_temporaries, write_bytes, write_npz, write_text
 from augmpm.render import FrameRenderer, write_animation
 from augmpm.scene import Scene, _plain_error
 from augmpm.simulation import Method, Simulation
@@ -77,20 +77,22 @@ def run_scene(
     render: bool = True,
     threads: int | None = None,
     checkpoint_every: int = CHECKPOINT_EVERY,
+    raise_on_failure: bool = True,
 ) -> RunResult:
     """Runs ``scene`` and writes its outputs into ``out``.
 
     A failure of the simulation (non-finite state, a particle leaving the grid, an
-    unstable step) stops the run; every frame written before it is kept and the
-    result's ``error`` says at which step and why. A checkpoint is written at the
-    first frame and every ``checkpoint_every`` frames after it (0: none).
+    unstable step) stops the run; every frame written before it is kept, and the
+    :class:`augmpm.SimulationError` is raised with the run's result as its ``result``
+    (with ``raise_on_failure=False`` the result is returned, its ``error`` saying at
+    which step and why). A checkpoint is written at the first frame and every
+    ``checkpoint_every`` frames after it (0: none).
     """
-    out = Path(out)
     _check_every(checkpoint_every)
+    out = output_dir(out)
     sim = Simulation(scene, method, threads=threads)
     scene, method = sim.scene, sim.method
     total = scene.time.steps if steps is None else steps
-    out.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(out)
     # The index files of an earlier run first, so that no row ever names a removed frame.
     for name in (CHECKPOINT, "metrics.csv", "particles.pvd"):
@@ -110,13 +112,20 @@ def run_scene(
         "render": render,
         "animation": animation,
     }
-    return _Run(sim, out, meta, checkpoint_every, progress, rows=[], done=0, frame=0, resumed=False).go()
+    return _Run(sim, out, meta, checkpoint_every, progress, rows=[], done=0, frame=0, resumed=False).go(
+        raise_on_failure
+    )
 
 
 def resume_run(
-    out: str | Path, progress: bool = True, threads: int | None = None, checkpoint_every: int | None = None
+    out: str | Path,
+    progress: bool = True,
+    threads: int | None = None,
+    checkpoint_every: int | None = None,
+    raise_on_failure: bool = True,
 ) -> RunResult:
-    """Continues the run in ``out`` from its checkpoint, with the settings it was started with.
+    """Continues the run in ``out`` from its checkpoint, with the settings it was started with; a failure
+    is raised or returned as by :func:`run_scene`.
 
     Frames and rows after the checkpoint are removed and computed again; the frames,
     ``metrics.csv`` and ``particles.pvd`` come out bitwise identical to those of a run that
@@ -150,7 +159,7 @@ def resume_run(
     _remove_frames_after(out, frame)
     for partial in out.glob("*.partial.*"):
         partial.unlink()
-    return run.go()
+    return run.go(raise_on_failure)
 
 
 class _Run:
@@ -179,7 +188,7 @@ class _Run:
         for sub in ("particles", "frames", "vtk"):
             (out / sub).mkdir(exist_ok=True)
 
-    def go(self) -> RunResult:
+    def go(self, raise_on_failure: bool) -> RunResult:
         sim, out, meta = self.sim, self.out, self.meta
         scene = sim.scene
         animation = meta["animation"] if meta["render"] else None
@@ -190,9 +199,10 @@ class _Run:
             stream = out / f"animation.{animation}" if animation and not self.resumed else None
             renderer = FrameRenderer(scene, title=f"{scene.name} ({sim.method})", animation=stream)
         self.renderer = renderer
-        error = None
+        error, failure = None, None
         start = wallclock.perf_counter()
-        bar = _progress(self.total, self.progress, initial=self.done)
+        label = f"{scene.name or 'run'} ({sim.method})"
+        bar = _progress(self.total, self.progress, initial=self.done, label=label)
         interval = scene.time.output_interval
         # The renderer is closed also on an interrupt, so that the frames drawn so far make a playable animation.
         with contextlib.closing(renderer) if renderer is not None else contextlib.nullcontext():
@@ -203,7 +213,7 @@ class _Run:
                 try:
                     sim.step(n)
                 except _core.SimulationError as e:
-                    error = str(e)
+                    error, failure = str(e), e
                     break
                 self.done += n
                 self.frame += 1
@@ -214,7 +224,7 @@ class _Run:
         if renderer is not None and animation and self.resumed:
             frames = sorted((out / "frames").glob("frame_*.png"), key=lambda f: int(_FRAME.match(f.name).group(1)))
             write_animation(frames, out / f"animation.{animation}")
-        return RunResult(
+        result = RunResult(
             out=out,
             frames=len(self.rows),
             final_metrics=sim.metrics(),
@@ -222,6 +232,10 @@ class _Run:
             error=error,
             warnings=sim.warnings,
         )
+        if failure is not None and raise_on_failure:
+            failure.result = result
+            raise failure
+        return result
 
     def output(self) -> None:
         """Writes frame ``self.frame``: its files, then its row of ``metrics.csv``, then a checkpoint if due."""
@@ -335,9 +349,9 @@ class _NoBar:
         pass
 
 
-def _progress(total: int, enabled: bool, initial: int = 0):
+def _progress(total: int, enabled: bool, initial: int = 0, label: str | None = None):
     if not enabled:
         return _NoBar()
     from tqdm import tqdm
 
-    return tqdm(total=total, initial=initial, unit="step", file=sys.stderr, dynamic_ncols=True)
+    return tqdm(total=total, initial=initial, desc=label, unit="step", file=sys.stderr, dynamic_ncols=True)

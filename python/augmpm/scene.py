@@ -7,9 +7,11 @@ inside the walls) is checked by the Rust core when the simulation is built.
 
 from __future__ import annotations
 
+import difflib
 import json
 import math
 import tomllib
+import typing
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -44,6 +46,13 @@ Method = Literal["naive", "augmented"]
 
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+    # Changed in code, a scene reports a bad value as loading one does: SceneError, naming the key.
+    def __setattr__(self, name: str, value: Any) -> None:
+        try:
+            super().__setattr__(name, value)
+        except ValidationError as e:
+            raise _scene_error(e) from None
 
 
 class Grid(_Strict):
@@ -220,6 +229,14 @@ class Augmented(_Strict):
 class Scene(_Strict):
     """A whole scene. Build one in code with keyword arguments or :meth:`from_dict`."""
 
+    # Built in code, a scene reports a bad value as loading one does: SceneError, naming the dotted key.
+    # (Only here: pydantic calls an overridden __init__ of nested models too, which would lose the path.)
+    def __init__(self, **data: Any) -> None:
+        try:
+            super().__init__(**data)
+        except ValidationError as e:
+            raise _scene_error(e) from None
+
     name: str = ""
     seed: Annotated[int, _INTEGER, Field(ge=0, lt=2**64)] = 0
     gravity: FiniteVec2 = (0.0, -9.81)
@@ -272,6 +289,32 @@ def _format_loc(loc: tuple[Any, ...]) -> str:
     return key or "scene"
 
 
+def _scene_keys() -> set[str]:
+    """Every key a scene's tables can hold (the fields of all its models)."""
+    keys: set[str] = set()
+    pending: list[type[BaseModel]] = [Scene]
+    seen: set[type[BaseModel]] = set()
+    while pending:
+        model = pending.pop()
+        if model in seen:
+            continue
+        seen.add(model)
+        keys.update(model.model_fields)
+        for field in model.model_fields.values():
+            for arg in _types_in(field.annotation):
+                if isinstance(arg, type) and issubclass(arg, BaseModel):
+                    pending.append(arg)
+    return keys
+
+
+def _types_in(annotation: Any) -> list[Any]:
+    """The types an annotation names, through unions, lists, tuples and Annotated."""
+    args = typing.get_args(annotation)
+    if not args:
+        return [annotation]
+    return [annotation, *(t for a in args for t in _types_in(a))]
+
+
 def _scene_error(e: ValidationError) -> SceneError:
     first = e.errors()[0]
     loc = tuple(first["loc"])
@@ -279,6 +322,9 @@ def _scene_error(e: ValidationError) -> SceneError:
     reason = first["msg"]
     if first["type"] == "extra_forbidden":
         reason = "unknown key"
+        guess = difflib.get_close_matches(str(loc[-1]), _scene_keys(), n=1, cutoff=0.75) if loc else []
+        if guess:
+            reason += f" (did you mean {guess[0]!r}?)"
     elif first["type"] == "missing" and loc and isinstance(loc[-1], int):
         # A short vector, e.g. gravity = [1.0]: name the vector, not an item the file does not have.
         key, reason = _format_loc(loc[:-1]), f"too few items (item {loc[-1]} is missing)"
@@ -300,7 +346,8 @@ def _parse_value(text: str) -> Any:
 
 
 def apply_override(data: dict[str, Any], item: str) -> None:
-    """Sets ``a.b[0].c=value`` (or ``a.b.0.c=value``) in ``data``; the value is parsed as TOML."""
+    """Sets ``a.b[0].c=value`` (or ``a.b.0.c=value``) in ``data``; the value is parsed as TOML. With nothing
+    after ``=`` (``time.cfl=``) the key is removed, so that another can take its place (``time.dt=1e-4``)."""
     if "=" not in item:
         raise _plain_error("--set", f"expected key=value, got {item!r}")
     path, _, text = item.partition("=")
@@ -320,7 +367,11 @@ def apply_override(data: dict[str, Any], item: str) -> None:
                 node[idx] = {}
         else:
             raise _plain_error(path, f"{'.'.join(parts[:i])} is not a table")
-        if last:
+        if last and not text.strip():
+            if isinstance(node, dict) and idx not in node:
+                raise _plain_error(path, "cannot remove it: the scene has no such key")
+            del node[idx]
+        elif last:
             node[idx] = _parse_value(text.strip())
         else:
             node = node[idx]

@@ -239,18 +239,33 @@ impl MemoryEstimate {
         if self.bytes <= available {
             return Ok(());
         }
-        let mb = |b: u64| b.div_ceil(1 << 20);
         Err(SceneError::new(
             &self.key,
             format!(
-                "the simulation would need about {} MiB ({} particles, {} grid nodes) but only {} MiB of memory \
+                "the simulation would need about {} ({} particles, {} grid nodes) but only {} of memory \
                  are available; lower grid.resolution or the seeding density",
-                mb(self.bytes),
+                byte_size(self.bytes),
                 self.particles,
                 self.nodes,
-                mb(available)
+                byte_size(available)
             ),
         ))
+    }
+}
+
+/// `bytes` in the largest binary unit that keeps it at 1 or more, to one decimal: "97.7 KiB", "1.5 MiB".
+fn byte_size(bytes: u64) -> String {
+    let units = ["B", "KiB", "MiB", "GiB", "TiB"];
+    let mut value = bytes as f64;
+    let mut unit = 0;
+    while value >= 1024.0 && unit + 1 < units.len() {
+        value /= 1024.0;
+        unit += 1;
+    }
+    if unit == 0 {
+        format!("{bytes} B")
+    } else {
+        format!("{value:.1} {}", units[unit])
     }
 }
 
