@@ -117,8 +117,10 @@ def test_a_polygon_closed_by_repeating_its_first_vertex_is_accepted(small_scene)
     closed = _mutate(copy.deepcopy(small_scene), "walls.0.vertices", [*vertices, vertices[0]])
     assert len(closed["walls"][0]["vertices"]) == len(small_scene["walls"][0]["vertices"]) + 1
     runs = [augmpm.Simulation(augmpm.Scene.from_dict(s), "augmented") for s in (small_scene, closed)]
+    assert np.array_equal(runs[0].boundary_points, runs[1].boundary_points)
     for sim in runs:
-        sim.step(5)
+        sim.step(200)
+    assert runs[0].metrics()["kinetic_energy"] > 0
     assert np.array_equal(runs[0].positions, runs[1].positions)
 
 
@@ -161,6 +163,24 @@ def test_set_with_nothing_after_the_equals_sign_removes_a_key(small_scene, write
     with pytest.raises(augmpm.SceneError) as err:
         augmpm.load_scene(path, ["time.nothing="])
     assert err.value.key == "time.nothing" and "no such key" in str(err.value)
+
+
+def test_end_time_sets_the_number_of_steps(small_scene, tmp_path):
+    """`time.end` (s) instead of `time.steps`: the run takes ⌈end / dt⌉ steps (an end a whole number of steps
+    away, up to rounding, takes that number); giving both, or neither, names `time`."""
+    small_scene["time"].pop("steps")
+    small_scene["time"].update(dt=1e-3, end=0.01, output_interval=5)
+    result = augmpm.run_scene(augmpm.Scene.from_dict(small_scene), tmp_path / "a", progress=False, render=False)
+    assert result.final_metrics["step"] == 10
+    time = augmpm.Scene.from_dict(small_scene).time
+    assert time.model_copy(update={"end": 0.0105}).total_steps(1e-3) == 11
+    for update in ({"steps": 5}, {"end": None}):
+        data = copy.deepcopy(small_scene)
+        data["time"].update(update)
+        data["time"] = {k: v for k, v in data["time"].items() if v is not None}
+        with pytest.raises(augmpm.SceneError, match="exactly one of steps and end") as err:
+            augmpm.Scene.from_dict(data)
+        assert err.value.key == "time"
 
 
 def test_dt_above_stable_bound_warns(small_scene):

@@ -46,7 +46,7 @@ def _parser() -> argparse.ArgumentParser:
         help=f"write a checkpoint every K output frames (default {CHECKPOINT_EVERY}; 0: none)",
     )
     r.add_argument("--out", type=Path, help="output directory (default: runs/<scene name>)")
-    r.add_argument("--steps", type=int, help="number of steps (default: the scene's time.steps)")
+    r.add_argument("--steps", type=int, help="number of steps (default: the scene's time.steps, or time.end / dt)")
     r.add_argument(
         "--method", choices=["naive", "augmented"], help="wall boundary method (default: the scene's method key)"
     )
@@ -66,7 +66,7 @@ def _parser() -> argparse.ArgumentParser:
     c = sub.add_parser("compare", help="run a scene with the naive and the augmented walls, side by side")
     c.add_argument("scene", type=Path, help="scene file (TOML)")
     c.add_argument("--out", type=Path, help="output directory (default: runs/<scene name>-compare)")
-    c.add_argument("--steps", type=int, help="number of steps (default: the scene's time.steps)")
+    c.add_argument("--steps", type=int, help="number of steps (default: the scene's time.steps, or time.end / dt)")
     c.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     c.add_argument("--gif", action="store_true", help="write comparison.gif instead of comparison.mp4")
     c.add_argument("--no-progress", action="store_true", help="hide the progress bars")

@@ -89,10 +89,10 @@ def run_scene(
     ``checkpoint_every`` frames after it (0: none).
     """
     _check_every(checkpoint_every)
-    out = output_dir(out)
     sim = Simulation(scene, method, threads=threads)
+    out = output_dir(out)
     scene, method = sim.scene, sim.method
-    total = scene.time.steps if steps is None else steps
+    total = scene.time.total_steps(sim.dt) if steps is None else steps
     remove_stale_temporaries(out)
     # The index files of an earlier run first, so that no row ever names a removed frame.
     for name in (CHECKPOINT, "metrics.csv", "particles.pvd"):

@@ -81,19 +81,35 @@ class Grid(_Strict):
 
 
 class Time(_Strict):
-    """Time step (s) or CFL number, number of steps, steps between output frames."""
+    """Time step (s) or CFL number, number of steps or end time (s), steps between output frames."""
 
     dt: PositiveFloat | None = None
     cfl: Annotated[float, _NUMBER, Field(gt=0, le=1)] | None = None
     # Steps are counted in 64-bit integers (Simulation.step takes fewer than 2**63 at once).
-    steps: Annotated[int, _INTEGER, Field(ge=0, lt=2**63)]
+    steps: Annotated[int, _INTEGER, Field(ge=0, lt=2**63)] | None = None
+    #: End time (s): the run takes ⌈end / dt⌉ steps.
+    end: Annotated[float, _NUMBER, Field(ge=0, allow_inf_nan=False)] | None = None
     output_interval: Annotated[int, _INTEGER, Field(ge=1, lt=2**63)]
 
     @model_validator(mode="after")
     def _dt_or_cfl(self) -> Time:
         if (self.dt is None) == (self.cfl is None):
             raise ValueError("give exactly one of dt and cfl")
+        if (self.steps is None) == (self.end is None):
+            raise ValueError("give exactly one of steps and end")
         return self
+
+    def total_steps(self, dt: float) -> int:
+        """The steps of the whole run at time step ``dt`` (s): ``steps``, or ⌈end / dt⌉ (an end within
+        rounding of a whole number of steps takes that number)."""
+        if self.steps is not None:
+            return self.steps
+        n = self.end / dt
+        whole = round(n)
+        total = whole if abs(n - whole) <= 1e-9 * max(whole, 1) else math.ceil(n)
+        if total >= 2**63:
+            raise _plain_error("time.end", f"{self.end} s at dt = {dt} s is more than 2**63 steps")
+        return total
 
 
 class PolygonWall(_Strict):
@@ -322,7 +338,8 @@ def _scene_error(e: ValidationError) -> SceneError:
     reason = first["msg"]
     if first["type"] == "extra_forbidden":
         reason = "unknown key"
-        guess = difflib.get_close_matches(str(loc[-1]), _scene_keys(), n=1, cutoff=0.75) if loc else []
+        keys = _scene_keys() - {str(loc[-1])} if loc else set()
+        guess = difflib.get_close_matches(str(loc[-1]), keys, n=1, cutoff=0.75) if loc else []
         if guess:
             reason += f" (did you mean {guess[0]!r}?)"
     elif first["type"] == "missing" and loc and isinstance(loc[-1], int):

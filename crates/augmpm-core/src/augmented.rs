@@ -135,10 +135,11 @@ fn centred_tilt<const D: usize, Ops: DimOps<D>>(
         let Some(inverse) = Ops::inverse(&cov) else { break };
         let mut step = -(inverse * mean);
         step /= step.norm().max(1.0);
-        let mut accepted = false;
+        let (mut accepted, mut capped) = (false, false);
         for _ in 0..4 {
             let mut trial = mu + step;
-            if trial.norm() > TILT_MAX {
+            capped = trial.norm() > TILT_MAX;
+            if capped {
                 trial *= TILT_MAX / trial.norm();
             }
             let (m_t, mean_t, cov_t) = moments(&trial);
@@ -148,7 +149,7 @@ fn centred_tilt<const D: usize, Ops: DimOps<D>>(
             }
             step *= 0.5;
         }
-        if !accepted || mu.norm() >= TILT_MAX {
+        if !accepted || capped {
             break;
         }
     }
@@ -571,6 +572,7 @@ impl<const D: usize> WallParticles<D> {
                     (*minv, kind, *near, *total, *tilt) = grid.stable_inverse::<Ops>(layout, x, p)?;
                 } else {
                     (*minv, kind, *near, *total) = grid.general_inverse::<Ops>(layout, x, p)?;
+                    *tilt = Tilt::none();
                 }
                 Ok(u64::from(matches!(kind, MlsKind::Regularized | MlsKind::Isolated)))
             })

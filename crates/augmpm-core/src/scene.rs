@@ -50,7 +50,12 @@ pub struct TimeSpec {
     /// Fraction of the materials' stable time step.
     #[serde(default)]
     pub cfl: Option<Real>,
-    pub steps: u64,
+    /// Steps to run; exactly one of `steps` and `end`.
+    #[serde(default)]
+    pub steps: Option<u64>,
+    /// End time (s): the run takes ⌈end / dt⌉ steps (counted by the front end that runs it).
+    #[serde(default)]
+    pub end: Option<Real>,
     /// Steps between output frames.
     pub output_interval: u64,
 }
@@ -415,6 +420,14 @@ impl Scene {
         let t = &self.time;
         if t.output_interval == 0 {
             return Err(SceneError::new("time.output_interval", "must be at least 1"));
+        }
+        match (t.steps, t.end) {
+            (Some(_), None) => {}
+            (None, Some(end)) if end.is_finite() && end >= 0.0 => {}
+            (None, Some(end)) => {
+                return Err(SceneError::new("time.end", format!("must be a non-negative time (s), got {end}")))
+            }
+            _ => return Err(SceneError::new("time", "give exactly one of steps and end")),
         }
         match (t.dt, t.cfl) {
             (Some(dt), None) => {

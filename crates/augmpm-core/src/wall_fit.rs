@@ -143,12 +143,17 @@ fn apply_rows<const D: usize>(rows: &[Row<D>], v: &mut Vector<D>, c: &mut Matrix
         k[j][j] += wide(a.inv_weight);
         k[j][m] = wide(a.residual);
     }
+    // A row that depends on the others (two sticky faces pinned at one particle ask the same of it)
+    // gets no multiplier of its own: the consistent system is solved by the others.
+    let scale = (0..m).map(|j| k[j][j].abs()).fold(0.0, f64::max);
+    let mut dependent = [false; MAX_ROWS];
     for col in 0..m {
         let pivot = (col..m).max_by(|&a, &b| k[a][col].abs().total_cmp(&k[b][col].abs())).unwrap_or(col);
         k.swap(col, pivot);
         let p = k[col][col];
-        if p.abs() < 1e-300 {
-            return;
+        if p.abs() <= 1e-12 * scale || p.abs() < 1e-300 {
+            dependent[col] = true;
+            continue;
         }
         for row in col + 1..m {
             let f = k[row][col] / p;
@@ -159,6 +164,9 @@ fn apply_rows<const D: usize>(rows: &[Row<D>], v: &mut Vector<D>, c: &mut Matrix
     }
     let mut lambda = [0.0f64; MAX_ROWS];
     for j in (0..m).rev() {
+        if dependent[j] {
+            continue;
+        }
         let s: f64 = (j + 1..m).map(|l| k[j][l] * lambda[l]).sum();
         lambda[j] = (k[j][m] - s) / k[j][j];
     }
@@ -225,6 +233,25 @@ mod tests {
         let (mut v, mut c) = (Vector2::new(1.0, 0.0), stretch);
         fit_to_walls(&minv, &x, &feet, &[WallCondition::Slip], (h, 1e-3), &mut v, &mut c);
         assert!(v.dot(&normal).abs() < 1e-15 && (v.x - 1.0).abs() < 1e-12, "pinned: {v}");
+    }
+
+    /// A particle past both faces of a sticky corner, both feet pinned to it, takes the wall's velocity
+    /// (zero): the two faces' identical rows are solved together, not dropped.
+    #[test]
+    fn a_particle_past_a_sticky_corner_takes_the_wall_velocity() {
+        let h = 0.01;
+        let minv = MlsInverse::<2>::regular(h);
+        let x = Vector2::new(0.5 + 1e-7, 0.5 + 1e-7);
+        let mut feet = WallFeet::default();
+        for (foot, normal) in
+            [(Vector2::new(0.5, x.y), Vector2::new(1.0, 0.0)), (Vector2::new(x.x, 0.5), Vector2::new(0.0, 1.0))]
+        {
+            feet.push(WallFoot { x: foot, normal, wall: 0, velocity: Vector2::zeros(), curvature: 0.0 }, 1e-7, 1e-12);
+        }
+        feet.pin_past(&x);
+        let (mut v, mut c) = (Vector2::new(0.3, -0.7), Matrix2::new(1.0, 2.0, 3.0, 4.0));
+        fit_to_walls(&minv, &x, &feet, &[WallCondition::Sticky], (h, 1e-3), &mut v, &mut c);
+        assert!(v.norm() < 1e-12, "{v}");
     }
 
     /// Inside a circular container of radius R, a particle on the slip wall moving along it at

@@ -58,10 +58,10 @@ impl Region<3> for BoxRegion {
     }
 }
 
-/// Points on the six faces of the box at spacing `h / 2`; edge and corner points carry two normals.
+/// Points on the six faces of the box at spacing about `h / 2`; edge and corner points carry two normals.
 fn box_points(region: &BoxRegion, h: Real) -> Vec<BoundaryPoint<3>> {
     let n = ((region.hi - region.lo) / (0.5 * h)).round() as usize;
-    let at = |i: usize| region.lo + (region.hi - region.lo) * i as Real / n as Real;
+    let at = |i: usize| if i == n { region.hi } else { region.lo + (region.hi - region.lo) * i as Real / n as Real };
     let mut points = Vec::new();
     for axis in 0..3 {
         for (side, sign) in [(region.lo, -1.0), (region.hi, 1.0)] {
