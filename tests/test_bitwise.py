@@ -18,7 +18,8 @@ from augmpm import bench
 from .conftest import SCENES
 
 #: (scene, method): first 16 hex digits of the SHA-256 of x, v, C, F and J_p after the steps below
-#: (recorded 2026-12-01 at the commit that added this test).
+#: (recorded 2026-12-01 at the commit that added this test; the paper scenes' digests are the same at
+#: a6bd882, before that day's centred weights and module moves).
 DIGESTS = {
     ("elastic_incline_fullslip", "naive"): "6030166693fd2bca",
     ("elastic_incline_fullslip", "augmented"): "d86ed2f15d561dea",
