@@ -32,14 +32,14 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-from augmpm.scene import Scene, load_scene
+from augmpm.scene import SHIPPED_SCENES, Scene, load_scene, scene_path
 from augmpm.simulation import Simulation
 
 #: The authors' code on this machine kind, Fig. 1 scene, 10,000 steps, one thread (s).
 AUTHORS_FIG1_SECONDS = {"naive": 9.3, "augmented": 32.3}
 #: Fig. 1 steps of the paper's comparison.
 FIG1_STEPS = 10_000
-DEFAULT_FIG1 = Path("scenes/paper/fluid_incline_noslip.toml")
+DEFAULT_FIG1 = SHIPPED_SCENES / "paper" / "fluid_incline_noslip.toml"
 #: Dam-break sizes: grid resolution → (particles per cell, part of the tank's width filled).
 DAM_BREAK_SIZES = {128: (4, 0.22), 256: (4, 0.44), 512: (8, 0.44)}
 METHODS = ("naive", "augmented")
@@ -257,8 +257,9 @@ def run_bench(
     from augmpm import _core
     from augmpm.simulation import resolve_threads
 
+    fig1 = scene_path(fig1)
     if not fig1.is_file():
-        raise _core.SceneError(f"--fig1: {fig1} not found (run from the repository root, or pass the scene's path)")
+        raise _core.SceneError(f"--fig1: {fig1} not found (a scene file, or a shipped scene's name)")
     threads = resolve_threads(threads)
     sizes = sizes or ((128, 256) if quick else (128, 256, 512))
     thread_counts = tuple(sorted({1, threads}))

@@ -13,7 +13,7 @@ from pathlib import Path
 from augmpm import _core
 from augmpm.files import write_text
 from augmpm.run import CHECKPOINT_EVERY, resume_run, run_scene
-from augmpm.scene import load_scene
+from augmpm.scene import SHIPPED_SCENES, load_scene, shipped_scenes
 
 EXIT_OK, EXIT_FAILED_RUN, EXIT_BAD_INPUT = 0, 1, 2
 _THREADS_HELP = "threads to run on (default: $AUGMPM_THREADS, else every core); results do not depend on it"
@@ -32,7 +32,7 @@ def _parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     r = sub.add_parser("run", help="run a scene file and write its outputs")
-    r.add_argument("scene", type=Path, nargs="?", help="scene file (TOML); not with --resume")
+    r.add_argument("scene", type=Path, nargs="?", help="scene file (TOML) or a shipped scene's name; not with --resume")
     r.add_argument(
         "--resume",
         type=Path,
@@ -72,16 +72,20 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     c.add_argument("--threads", type=int, metavar="N", help=_THREADS_HELP)
 
-    b = sub.add_parser("bench", help="measure speed, memory and output cost (run from the repository root)")
+    b = sub.add_parser("bench", help="measure speed, memory and output cost")
     b.add_argument("--quick", action="store_true", help="fewer steps, dam break at 128² and 256² only (~1 min)")
     b.add_argument("--json", type=Path, metavar="FILE", help="also write the report as JSON")
-    b.add_argument("--fig1", type=Path, default=Path("scenes/paper/fluid_incline_noslip.toml"), help="Fig. 1 scene")
+    b.add_argument(
+        "--fig1", type=Path, default=SHIPPED_SCENES / "paper" / "fluid_incline_noslip.toml", help="Fig. 1 scene"
+    )
     b.add_argument("--threads", type=int, metavar="N", help="threads of the multi-threaded rows (default: every core)")
 
     v = sub.add_parser("validate", help="run the validation suite (analytic flows, experiments) and write a report")
     v.add_argument("--quick", action="store_true", help="coarse and short (a few minutes on 2 cores)")
     v.add_argument("--out", type=Path, default=Path("runs/validation"), help="output directory")
     v.add_argument("--no-progress", action="store_true", help="do not print progress")
+
+    sub.add_parser("scenes", help="list the scenes shipped with augmpm (run one by its name)")
 
     i = sub.add_parser("interp-test", help="the paper's Fig. 4 interpolation test (naive vs augmented)")
     i.add_argument("--out", type=Path, default=Path("runs/interp-test"), help="output directory")
@@ -231,6 +235,15 @@ def _interp_test(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _scenes() -> int:
+    """Prints each shipped scene's name and the first line of its description (its leading comment)."""
+    for name, path in shipped_scenes().items():
+        lines = path.read_text(encoding="utf-8").splitlines()
+        about = next((line.lstrip("# ").strip() for line in lines if line.startswith("#")), "")
+        print(f"{name:<32} {about}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
         args = _parser().parse_args(argv)
@@ -247,6 +260,8 @@ def main(argv: list[str] | None = None) -> int:
             return _validate(args)
         if args.command == "bench":
             return _bench(args)
+        if args.command == "scenes":
+            return _scenes()
     except _core.SceneError as e:
         print(f"augmpm: bad input: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT

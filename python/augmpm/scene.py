@@ -400,9 +400,29 @@ def _plain_error(key: str, reason: str) -> SceneError:
     return err
 
 
-def load_scene(path: str | Path, overrides: list[str] | None = None) -> Scene:
-    """Reads and validates a TOML scene file; raises :class:`SceneError` on bad input."""
+#: The scenes shipped with the package (``augmpm scenes`` lists them).
+SHIPPED_SCENES = Path(__file__).resolve().parent / "scenes"
+
+
+def shipped_scenes() -> dict[str, Path]:
+    """The shipped scenes by name (``dam_break``, ``paper/fluid_incline_noslip``, ...)."""
+    return {p.relative_to(SHIPPED_SCENES).with_suffix("").as_posix(): p for p in sorted(SHIPPED_SCENES.rglob("*.toml"))}
+
+
+def scene_path(path: str | Path) -> Path:
+    """``path`` if it names a file, else the shipped scene of that name (``paper/fluid_incline_noslip``,
+    with or without ``.toml``), else ``path`` (so that reading it reports it missing)."""
     path = Path(path)
+    if path.exists():
+        return path
+    name = path.with_suffix("").as_posix() if path.suffix == ".toml" else path.as_posix()
+    return shipped_scenes().get(name, path)
+
+
+def load_scene(path: str | Path, overrides: list[str] | None = None) -> Scene:
+    """Reads and validates a TOML scene file, or a shipped scene by name (see :func:`scene_path`);
+    raises :class:`SceneError` on bad input."""
+    path = scene_path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as e:
