@@ -161,3 +161,39 @@ def test_f32_keeps_every_boundary_point_and_runs_the_dam_break():
 def test_unknown_precision_is_refused(small_scene):
     with pytest.raises(augmpm.SceneError, match="precision"):
         augmpm.Scene.from_dict({**small_scene, "precision": "f16"})
+
+
+def test_the_engine_stub_matches_the_engine():
+    """python/augmpm/_core.pyi names exactly the public classes, functions and members of the compiled module
+    (its methods and properties, by kind), so that type checkers and editors see the engine as it is."""
+    import ast
+    import inspect
+    from pathlib import Path
+
+    from augmpm import _core
+
+    tree = ast.parse((Path(augmpm.__file__).parent / "_core.pyi").read_text(encoding="utf-8"))
+    stub: dict[str, set[str]] = {}
+    for node in tree.body:
+        if isinstance(node, ast.ClassDef):
+            members = set()
+            for item in node.body:
+                if isinstance(item, ast.FunctionDef) and item.name != "__new__":
+                    is_property = any(isinstance(d, ast.Name) and d.id == "property" for d in item.decorator_list)
+                    members.add(f"{item.name}:{'property' if is_property else 'method'}")
+            stub[node.name] = members
+        elif isinstance(node, ast.AnnAssign):
+            stub[node.target.id] = set()
+    runtime: dict[str, set[str]] = {}
+    for name, obj in vars(_core).items():
+        if name.startswith("_") and name != "__version__":
+            continue
+        if not (inspect.isclass(obj) or name == "__version__"):
+            continue
+        members = set()
+        if inspect.isclass(obj) and not issubclass(obj, BaseException):
+            for m, attr in vars(obj).items():
+                if not m.startswith("_"):
+                    members.add(f"{m}:{'property' if inspect.isdatadescriptor(attr) else 'method'}")
+        runtime[name] = members
+    assert stub == runtime
