@@ -517,7 +517,8 @@ where
                         }
                         AugmentedTransfer::Stable => {
                             let mut feet = region.wall_feet(xp, WALL_REACH * h);
-                            if !g.surely_inside(layout, xp) && region.distance(xp).distance >= 0.0 {
+                            // Only a particle with a face in reach can lie past one (then its distance says so).
+                            if !feet.is_empty() && !g.surely_inside(layout, xp) && region.distance(xp).distance >= 0.0 {
                                 feet.pin_past(xp);
                             }
                             crate::wall_fit::fit_to_walls(minv, xp, &feet, &g.walls, (h, dt), &mut vn, &mut cn);
@@ -610,14 +611,7 @@ mod tests {
 
     /// A stress-free material: P2G → G2P must then conserve momentum exactly.
     fn dust() -> Vec<Material> {
-        vec![Material::Fluid(WeaklyCompressibleFluid {
-            density: 1.0,
-            stiffness: 0.0,
-            gamma: 1.0,
-            viscosity: 0.0,
-            min_pressure: 0.0,
-            density_estimate: crate::material::DensityEstimate::Grid,
-        })]
+        vec![Material::Fluid(WeaklyCompressibleFluid::dust(1.0))]
     }
 
     /// With no walls and no stress, P2G → G2P conserves mass, linear and angular momentum to

@@ -6,7 +6,7 @@
 use augmpm_core::augmented::{AugmentedGrid, AugmentedTransfer, WallParticles};
 use augmpm_core::geometry::{Point, Polygon, Region, WallDistance, WallShape, Walls2};
 use augmpm_core::grid::{GridLayout, GridState};
-use augmpm_core::material::{DensityEstimate, Material, WeaklyCompressibleFluid};
+use augmpm_core::material::{Material, WeaklyCompressibleFluid};
 use augmpm_core::math::{Dim, Real};
 use augmpm_core::particles::Particles;
 use augmpm_core::schedule::Schedule;
@@ -28,14 +28,7 @@ fn tilted_container(angle: Real, y0: Real) -> (Walls2, Point, Point) {
 
 /// A stress-free material: the transfers alone move momentum.
 fn dust() -> Vec<Material> {
-    vec![Material::Fluid(WeaklyCompressibleFluid {
-        density: 1.0,
-        stiffness: 0.0,
-        gamma: 1.0,
-        viscosity: 0.0,
-        min_pressure: 0.0,
-        density_estimate: DensityEstimate::Grid,
-    })]
+    vec![Material::Fluid(WeaklyCompressibleFluid::dust(1.0))]
 }
 
 /// Particles within `depth` (m) above the floor of the container, between 0.3 and 0.7 of its

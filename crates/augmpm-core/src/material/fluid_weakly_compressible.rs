@@ -52,6 +52,19 @@ fn default_gamma() -> Real {
 pub const MAX_DILATION: Real = 1.25;
 
 impl WeaklyCompressibleFluid {
+    /// Dust: a fluid of rest density `density` (kg/m²) with no pressure and no viscosity, so that the
+    /// transfers alone move its momentum (what conservation tests of the transfers run on).
+    pub fn dust(density: Real) -> Self {
+        Self {
+            density,
+            stiffness: 0.0,
+            gamma: 1.0,
+            viscosity: 0.0,
+            min_pressure: 0.0,
+            density_estimate: DensityEstimate::Grid,
+        }
+    }
+
     /// Pressure (Pa) at density `rho`.
     pub fn pressure(&self, rho: Real) -> Real {
         let ratio = rho / self.density;
