@@ -156,8 +156,8 @@ def _run(args: argparse.Namespace) -> int:
         return EXIT_FAILED_RUN
     print(
         f"{result.frames} frames in {out} ({result.wall_time:.1f} s); step {m['step']}, t = {m['time']:.4g} s, "
-        f"kinetic energy {m['kinetic_energy']:.4g}, {m['n_outside']} particles outside the walls, "
-        f"deepest {m['max_penetration']:.3f} h"
+        f"kinetic energy {m['kinetic_energy']:.4g}, {m['n_outside']} particle{'' if m['n_outside'] == 1 else 's'} "
+        f"outside the walls, deepest {m['max_penetration']:.2g} h"
     )
     return EXIT_OK
 
