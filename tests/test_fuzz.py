@@ -892,7 +892,7 @@ CLI_CASES = {
     "bow-tie wall": (("walls", 0), "vertices", [[0.1, 0.1], [0.9, 0.9], [0.9, 0.1], [0.1, 0.9]], "walls[0].vertices"),
     "body outside the walls": (("bodies", 0), "min", [-0.5, 0.5], "bodies[0]"),
     "walls enclose nothing": ((), "walls", [{"type": "circle", "center": [0.5, 0.5], "radius": 0.75}], "bodies[0]"),
-    "subnormal domain width": (("grid",), "domain", [5e-324, 1.0], "grid"),  # was a ZeroDivisionError traceback
+    "subnormal domain width": (("grid",), "domain", [5e-324, 1.0], "grid.domain"),  # was a ZeroDivisionError traceback
 }
 
 

@@ -58,7 +58,7 @@ BAD = [
     ("body outside the walls", "bodies.0.min", [0.02, 0.02], "bodies[0]", "outside the walls"),
     ("body outside the domain", "bodies.0.max", [1.2, 0.8], "bodies[0]", "outside the walls"),
     ("both dt and cfl", "time.cfl", 0.5, "time", "exactly one of dt and cfl"),
-    ("grid height not whole cells", "grid.domain", [1.0, 0.51], "grid", "whole number"),
+    ("grid height not whole cells", "grid.domain", [1.0, 0.51], "grid.domain", "whole number"),
     ("grid too large for memory", "grid.resolution", 20000, "grid.resolution", "MB"),
     ("grid height overflows", "grid.domain", [1.0, 1e300], "grid.resolution", "MB"),
     (

@@ -10,6 +10,12 @@ import numpy.typing as npt
 
 __version__: str
 
+def scene_schema() -> str:
+    """The JSON Schema of scene files: each key's type, doc, default, range and unit."""
+
+def check_scene(scene_json: str) -> None:
+    """Checks a resolved scene (JSON) as the engine does before building it; raises SceneError."""
+
 class Error(Exception):
     """Base class of every augmpm error."""
 

@@ -13,7 +13,7 @@ from pathlib import Path
 from augmpm import _core
 from augmpm.files import write_text
 from augmpm.run import CHECKPOINT_EVERY, resume_run, run_scene
-from augmpm.scene import SHIPPED_SCENES, load_scene, shipped_scenes
+from augmpm.scene import SCHEMA, SHIPPED_SCENES, load_scene, shipped_scenes
 
 EXIT_OK, EXIT_FAILED_RUN, EXIT_BAD_INPUT = 0, 1, 2
 _THREADS_HELP = "threads to run on (default: $AUGMPM_THREADS, else every core); results do not depend on it"
@@ -86,6 +86,8 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--no-progress", action="store_true", help="do not print progress")
 
     sub.add_parser("scenes", help="list the scenes shipped with augmpm (run one by its name)")
+    sc = sub.add_parser("schema", help="print the JSON Schema of scene files (for editors), or the scene reference")
+    sc.add_argument("--markdown", action="store_true", help="the scene reference as Markdown, as in the README")
 
     i = sub.add_parser("interp-test", help="the paper's Fig. 4 interpolation test (naive vs augmented)")
     i.add_argument("--out", type=Path, default=Path("runs/interp-test"), help="output directory")
@@ -244,6 +246,18 @@ def _scenes() -> int:
     return 0
 
 
+def _schema(markdown: bool) -> int:
+    """Prints the JSON Schema of scene files (TOML editors such as Taplo validate against it) or the
+    scene reference generated from it."""
+    if markdown:
+        from augmpm.reference import scene_reference
+
+        print(scene_reference(), end="")
+    else:
+        print(json.dumps(SCHEMA, indent=2, ensure_ascii=False))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
         args = _parser().parse_args(argv)
@@ -262,6 +276,8 @@ def main(argv: list[str] | None = None) -> int:
             return _bench(args)
         if args.command == "scenes":
             return _scenes()
+        if args.command == "schema":
+            return _schema(args.markdown)
     except _core.SceneError as e:
         print(f"augmpm: bad input: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -1,8 +1,10 @@
 """Scene files: TOML in, a validated :class:`Scene` out.
 
-The pydantic models check types, unknown keys and ranges, naming the key of
-every error; geometry (polygon orientation and self-intersection, bodies
-inside the walls) is checked by the Rust core when the simulation is built.
+Every key is declared once, in the engine's types, which export a JSON Schema (:data:`SCHEMA`); the
+pydantic models here are built from it and check types, unknown keys and ranges, naming the key of
+every error. The rules between keys (one of ``time.dt`` and ``time.cfl``, ...) are the engine's,
+asked of it when a scene is validated; geometry (polygon orientation and self-intersection, bodies
+inside the walls) is checked when the simulation is built.
 """
 
 from __future__ import annotations
@@ -15,10 +17,12 @@ import typing
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+import pydantic
 import tomli_w
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
 from pydantic_core import PydanticCustomError
 
+from augmpm import _core
 from augmpm._core import SceneError
 
 
@@ -36,12 +40,11 @@ def _typed(expected: str) -> BeforeValidator:
 
 
 _NUMBER, _INTEGER = _typed("number"), _typed("integer")
-Vec2 = tuple[float, float]
-PositiveFloat = Annotated[float, _NUMBER, Field(gt=0, allow_inf_nan=False)]
-FiniteFloat = Annotated[float, _NUMBER, Field(allow_inf_nan=False)]
-FiniteVec2 = tuple[FiniteFloat, FiniteFloat]
-WallCondition = Literal["sticky", "slip", "separate"]
-Method = Literal["naive", "augmented"]
+
+#: The JSON Schema of scene files, exported by the engine from the types that declare every key once
+#: (name, type, default, range, unit, doc line). The models below are built from it.
+SCHEMA: dict[str, Any] = json.loads(_core.scene_schema())
+_DEFS: dict[str, Any] = SCHEMA["$defs"]
 
 
 class _Strict(BaseModel):
@@ -55,50 +58,17 @@ class _Strict(BaseModel):
             raise _scene_error(e) from None
 
 
-class Grid(_Strict):
-    """Domain box [0, Lx] × [0, Ly] (m) and cells along x (h = Lx / resolution)."""
+# What the Python models add to the schema's keys, by the schema's type name.
 
-    domain: tuple[PositiveFloat, PositiveFloat]
-    resolution: Annotated[int, _INTEGER, Field(ge=2, le=65536)]
-    #: Correct the fluid density gathered next to walls for the part of the kernel in the wall.
-    density_wall_correction: Annotated[bool, Field(strict=True)] = False
 
+class _Grid(_Strict):
     @property
     def cell_size(self) -> float:
+        """Cell width h (m)."""
         return self.domain[0] / self.resolution
 
-    @model_validator(mode="after")
-    def _whole_cells(self) -> Grid:
-        h = self.cell_size
-        ny = self.domain[1] / h if h > 0 else math.inf  # h underflows to 0 for a subnormal width
-        if not math.isfinite(ny):
-            raise ValueError(f"domain height {self.domain[1]} is not a finite number of cells of width {h}")
-        if abs(ny - round(ny)) > 1e-9 * max(ny, 1.0) or round(ny) < 2:
-            raise ValueError(
-                f"domain height {self.domain[1]} is not a whole number (>= 2) of cells of width {self.cell_size}"
-            )
-        return self
 
-
-class Time(_Strict):
-    """Time step (s) or CFL number, number of steps or end time (s), steps between output frames."""
-
-    dt: PositiveFloat | None = None
-    cfl: Annotated[float, _NUMBER, Field(gt=0, le=1)] | None = None
-    # Steps are counted in 64-bit integers (Simulation.step takes fewer than 2**63 at once).
-    steps: Annotated[int, _INTEGER, Field(ge=0, lt=2**63)] | None = None
-    #: End time (s): the run takes ⌈end / dt⌉ steps.
-    end: Annotated[float, _NUMBER, Field(ge=0, allow_inf_nan=False)] | None = None
-    output_interval: Annotated[int, _INTEGER, Field(ge=1, lt=2**63)]
-
-    @model_validator(mode="after")
-    def _dt_or_cfl(self) -> Time:
-        if (self.dt is None) == (self.cfl is None):
-            raise ValueError("give exactly one of dt and cfl")
-        if (self.steps is None) == (self.end is None):
-            raise ValueError("give exactly one of steps and end")
-        return self
-
+class _Time(_Strict):
     def total_steps(self, dt: float) -> int:
         """The steps of the whole run at time step ``dt`` (s): ``steps``, or ⌈end / dt⌉ (an end within
         rounding of a whole number of steps takes that number)."""
@@ -112,137 +82,7 @@ class Time(_Strict):
         return total
 
 
-class PolygonWall(_Strict):
-    """Closed polygon, counter-clockwise, material inside."""
-
-    type: Literal["polygon"]
-    vertices: Annotated[list[FiniteVec2], Field(min_length=3)]
-    condition: WallCondition | None = None
-    velocity: FiniteVec2 = (0.0, 0.0)
-    #: Surface speed (m/s) counter-clockwise along the polygon: a belt loop.
-    tangential_speed: FiniteFloat = 0.0
-
-
-class CircleWall(_Strict):
-    """Circle; material ``outside`` it (an obstacle) or ``inside`` it (a container)."""
-
-    type: Literal["circle"]
-    center: FiniteVec2
-    radius: PositiveFloat
-    side: Literal["outside", "inside"] = "outside"
-    condition: WallCondition | None = None
-    velocity: FiniteVec2 = (0.0, 0.0)
-    #: Surface speed (m/s) counter-clockwise around the centre: a spinning cylinder.
-    tangential_speed: FiniteFloat = 0.0
-
-
-Wall = Annotated[PolygonWall | CircleWall, Field(discriminator="type")]
-
-
-class Fluid(_Strict):
-    """Weakly compressible Newtonian fluid: p = k((ρ/ρ0)^γ − 1) ≥ min_pressure, σ = −pI + μ(∇v + ∇vᵀ)."""
-
-    type: Literal["fluid"]
-    density: PositiveFloat
-    stiffness: PositiveFloat
-    gamma: PositiveFloat = 7.0
-    viscosity: Annotated[float, _NUMBER, Field(ge=0, allow_inf_nan=False)] = 0.0
-    min_pressure: Annotated[float, _NUMBER, Field(le=0, allow_inf_nan=False)] = 0.0
-    #: Where ρ comes from: "deformation" (ρ0/J, J̇ = J tr ∇v; default) or "grid" (scattered masses, the paper's).
-    density_estimate: Literal["deformation", "grid"] = "deformation"
-
-
-class _Solid(_Strict):
-    density: PositiveFloat
-    youngs_modulus: PositiveFloat
-    poisson_ratio: Annotated[float, _NUMBER, Field(gt=-1.0, lt=0.5)]
-
-
-class Elastic(_Solid):
-    """Fixed-corotated hyperelastic solid."""
-
-    type: Literal["elastic"]
-
-
-class Stvk(_Solid):
-    """St. Venant–Kirchhoff solid."""
-
-    type: Literal["stvk"]
-
-
-class Snow(_Solid):
-    """Stomakhin et al. 2013 snow: fixed-corotated with clamped singular values and hardening."""
-
-    type: Literal["snow"]
-    critical_compression: Annotated[float, _NUMBER, Field(gt=0, lt=1)] = 2.5e-2
-    critical_stretch: PositiveFloat = 7.5e-3
-    hardening: Annotated[float, _NUMBER, Field(ge=0, allow_inf_nan=False)] = 10.0
-    jp_min: PositiveFloat = 0.6
-    jp_max: PositiveFloat = 20.0
-
-
-Material = Annotated[Fluid | Elastic | Stvk | Snow, Field(discriminator="type")]
-
-
-class Seeding(_Strict):
-    """Jittered grid: one random point per square of side ``spacing`` (m), or ``per_cell`` per grid cell."""
-
-    spacing: PositiveFloat | None = None
-    per_cell: Annotated[int, _INTEGER, Field(ge=1, le=1024)] | None = None
-
-    @model_validator(mode="after")
-    def _one_of(self) -> Seeding:
-        if self.spacing is not None and self.per_cell is not None:
-            raise ValueError("give spacing or per_cell, not both")
-        return self
-
-
-class _Body(_Strict):
-    material: Material
-    velocity: FiniteVec2 = (0.0, 0.0)
-    seeding: Seeding = Field(default_factory=Seeding)
-
-
-class PolygonBody(_Body):
-    """Polygon in a local frame, placed at ``center + scale * vertex``; counter-clockwise."""
-
-    shape: Literal["polygon"]
-    vertices: Annotated[list[FiniteVec2], Field(min_length=3)]
-    scale: PositiveFloat = 1.0
-    center: FiniteVec2 = (0.0, 0.0)
-
-
-class BoxBody(_Body):
-    shape: Literal["box"]
-    min: FiniteVec2
-    max: FiniteVec2
-
-    @model_validator(mode="after")
-    def _ordered(self) -> BoxBody:
-        if not (self.max[0] > self.min[0] and self.max[1] > self.min[1]):
-            raise ValueError("max must exceed min along both axes")
-        return self
-
-
-class CircleBody(_Body):
-    shape: Literal["circle"]
-    center: FiniteVec2
-    radius: PositiveFloat
-
-
-Body = Annotated[PolygonBody | BoxBody | CircleBody, Field(discriminator="shape")]
-
-
-class Augmented(_Strict):
-    """Augmented grid: exclusion distance δ (Fig. 3) and largest boundary-point spacing, in cell widths."""
-
-    delta: Annotated[float, _NUMBER, Field(ge=0, lt=1.5)] = 0.25
-    spacing: Annotated[float, _NUMBER, Field(gt=0.05, le=1.0)] = 1.0
-    #: "stable" (default: energy-stable transfer fitted to the wall value) or "paper" (the paper's φ transfer).
-    transfer: Literal["stable", "paper"] = "stable"
-
-
-class Scene(_Strict):
+class _Scene(_Strict):
     """A whole scene. Build one in code with keyword arguments or :meth:`from_dict`."""
 
     # Built in code, a scene reports a bad value as loading one does: SceneError, naming the dotted key.
@@ -253,23 +93,15 @@ class Scene(_Strict):
         except ValidationError as e:
             raise _scene_error(e) from None
 
-    name: str = ""
-    seed: Annotated[int, _INTEGER, Field(ge=0, lt=2**64)] = 0
-    gravity: FiniteVec2 = (0.0, -9.81)
-    grid: Grid
-    time: Time
-    #: How walls act on the grid: "augmented" (default: the paper's augmented grid) or "naive" (grid nodes on
-    #: the wall side take the wall's condition). ``Simulation(scene, method)`` and ``--method`` override it.
-    method: Method = "augmented"
-    wall_condition: WallCondition = "sticky"
-    walls: list[Wall] = Field(default_factory=list)
-    bodies: Annotated[list[Body], Field(min_length=1)]
-    augmented: Augmented = Field(default_factory=Augmented)
-    #: Floating-point precision of the engine: "f64" (default) or "f32" (same code, single precision).
-    precision: Literal["f32", "f64"] = "f64"
+    # The rules between keys (one of dt and cfl, whole cells, ...) are the engine's, checked where it
+    # checks them: each key's own range is checked above, by the fields built from the schema.
+    @model_validator(mode="after")
+    def _rules(self) -> Any:
+        _core.check_scene(self.to_json())
+        return self
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> Scene:
+    def from_dict(cls, data: dict[str, Any]) -> Any:
         """Validates a plain dict (as read from TOML); raises :class:`SceneError` naming the key."""
         try:
             return cls.model_validate(data)
@@ -285,12 +117,140 @@ class Scene(_Strict):
     def to_toml(self) -> str:
         return tomli_w.dumps(self.to_dict())
 
-    def with_overrides(self, overrides: list[str]) -> Scene:
+    def with_overrides(self, overrides: list[str]) -> Any:
         """A copy with ``key=value`` overrides applied (see :func:`apply_override`)."""
         data = self.to_dict()
         for item in overrides:
             apply_override(data, item)
-        return Scene.from_dict(data)
+        return type(self).from_dict(data)
+
+
+_BASES: dict[str, type[_Strict]] = {"Scene": _Scene, "GridSpec": _Grid, "TimeSpec": _Time}
+
+
+def _python_name(name: str) -> str:
+    """The Python name of a schema type: ``GridSpec`` → ``Grid``."""
+    return name.removesuffix("Spec")
+
+
+def _def_of(schema: dict[str, Any]) -> tuple[str, dict[str, Any]] | None:
+    ref = schema.get("$ref")
+    return (ref.rsplit("/", 1)[-1], _DEFS[ref.rsplit("/", 1)[-1]]) if ref else None
+
+
+def _tag_of(options: list[dict[str, Any]]) -> str | None:
+    """The key that tells the options of a choice of tables apart (``type``, ``shape``)."""
+    props = options[0].get("properties", {})
+    for name, prop in props.items():
+        if "const" in prop and all("const" in o.get("properties", {}).get(name, {}) for o in options):
+            return name
+    return None
+
+
+def _bounds(schema: dict[str, Any]) -> dict[str, Any]:
+    names = {"minimum": "ge", "maximum": "le", "exclusiveMinimum": "gt", "exclusiveMaximum": "lt"}
+    return {arg: schema[key] for key, arg in names.items() if key in schema}
+
+
+def _annotation(schema: dict[str, Any], hint: str) -> Any:
+    """The pydantic type of a key's schema (its doc, default and unit go to its Field)."""
+    if (found := _def_of(schema)) is not None:
+        return _annotation(found[1], found[0])
+    if "anyOf" in schema:  # an optional choice
+        other = next(o for o in schema["anyOf"] if o.get("type") != "null")
+        return _annotation(other, hint) | None
+    if "oneOf" in schema:
+        options = schema["oneOf"]
+        if all("const" in o for o in options):
+            return Literal[tuple(o["const"] for o in options)]
+        tag = _tag_of(options)
+        models = tuple(_model(o["title"], o, shared=schema) for o in options)
+        return Annotated[typing.Union[models], Field(discriminator=tag)]  # noqa: UP007 (a runtime tuple)
+    kinds = schema.get("type")
+    kinds = [kinds] if isinstance(kinds, str) else list(kinds or [])
+    optional = "null" in kinds
+    kind = next(k for k in kinds if k != "null")
+    if kind == "object":
+        t: Any = _model(hint, schema)
+    elif kind == "number":
+        t = Annotated[float, _NUMBER, Field(allow_inf_nan=False, **_bounds(schema))]
+    elif kind == "integer":
+        t = Annotated[int, _INTEGER, Field(**_bounds(schema))]
+    elif kind == "boolean":
+        t = Annotated[bool, Field(strict=True)]
+    elif kind == "string":
+        t = Literal[schema["const"]] if "const" in schema else str
+    elif kind == "array":
+        item = _annotation(schema["items"], hint)
+        n = schema.get("minItems")
+        if n is not None and n == schema.get("maxItems"):
+            t = tuple[(item,) * n]
+        else:
+            t = Annotated[list[item], Field(min_length=n)] if n else list[item]
+    else:
+        raise TypeError(f"scene schema: no Python type for {kind!r} ({hint})")
+    return t | None if optional else t
+
+
+_MODELS: dict[str, type[_Strict]] = {}
+
+
+def _model(name: str, schema: dict[str, Any], shared: dict[str, Any] | None = None) -> type[_Strict]:
+    """The model of a table: its own keys, and those of ``shared``, the schema of a choice whose options
+    add their keys to common ones (a body's shape beside its material)."""
+    name = _python_name(name)
+    if name in _MODELS:
+        return _MODELS[name]
+    properties = {**(shared or {}).get("properties", {}), **schema.get("properties", {})}
+    required = {*(shared or {}).get("required", []), *schema.get("required", [])}
+    fields: dict[str, Any] = {}
+    for key, prop in properties.items():
+        annotation = _annotation(prop, key)
+        extra = {"unit": prop["unit"]} if "unit" in prop else None
+        info: dict[str, Any] = {"description": prop.get("description"), "json_schema_extra": extra}
+        if key not in required:
+            default = prop.get("default")
+            found = _def_of(prop)
+            if isinstance(default, dict) and found is not None:
+                model = _MODELS[_python_name(found[0])]
+                info["default_factory"] = lambda model=model, default=default: model.model_validate(default)
+            elif isinstance(default, list) and typing.get_origin(annotation) is tuple:
+                info["default"] = tuple(default)
+            elif isinstance(default, list):
+                info["default_factory"] = lambda default=default: list(default)
+            else:
+                info["default"] = default
+        fields[key] = (annotation, Field(**info))
+    base = _BASES.get(name, _BASES.get(f"{name}Spec", _Strict))
+    model = pydantic.create_model(name, __base__=base, __doc__=schema.get("description"), **fields)
+    model.__module__ = __name__
+    _MODELS[name] = model
+    return model
+
+
+Scene = _model("Scene", SCHEMA)
+Grid, Time, Augmented, Seeding = (_MODELS[n] for n in ("Grid", "Time", "Augmented", "Seeding"))
+PolygonWall, CircleWall = _MODELS["PolygonWall"], _MODELS["CircleWall"]
+PolygonBody, BoxBody, CircleBody = _MODELS["PolygonBody"], _MODELS["BoxBody"], _MODELS["CircleBody"]
+Fluid, Elastic, Stvk, Snow = (_MODELS[n] for n in ("Fluid", "Elastic", "Stvk", "Snow"))
+#: How walls act on the grid, by name.
+Method = _annotation(_DEFS["Method"], "Method")
+WallCondition = _annotation(_DEFS["WallCondition"], "WallCondition")
+
+
+def _choice_tags() -> set[str]:
+    """The names that choose an option of a table (``polygon``, ``fluid``): pydantic puts them in the path
+    of an error inside the option, where the file has no such key."""
+    tags: set[str] = set()
+    for d in _DEFS.values():
+        options = d.get("oneOf", [])
+        tag = _tag_of(options) if options and not all("const" in o for o in options) else None
+        if tag:
+            tags.update(o["properties"][tag]["const"] for o in options)
+    return tags
+
+
+_TAGS = _choice_tags()
 
 
 def _format_loc(loc: tuple[Any, ...]) -> str:
@@ -298,7 +258,7 @@ def _format_loc(loc: tuple[Any, ...]) -> str:
     for part in loc:
         if isinstance(part, int):
             key += f"[{part}]"
-        elif part in ("polygon", "circle", "box", "fluid", "elastic", "stvk", "snow") and key:
+        elif part in _TAGS and key:
             continue  # the tag of a discriminated union, not a key of the file
         else:
             key += ("." if key else "") + str(part)

@@ -8,19 +8,23 @@ use crate::grid::{GridLayout, OutOfGrid};
 use crate::kernel::{weight, MlsInverse, MlsKind, Moments, Stencil};
 use crate::math::{floor_i64, DimOps, Real, Vector};
 use crate::wall::{BoundaryPoint, WallCondition};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// How mass and momentum move between particles and the augmented grid (`augmented.transfer`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum AugmentedTransfer {
     /// Energy-stable: P2G with the particle's normalised B-spline weights `w / Σw` (the transpose
     /// of the G2P fit), G2P fitted to the wall value at the particle's foot on each wall in reach
     /// ([`crate::wall_fit`]); no velocity clamp, no mass floor.
+    #[schemars(description = "energy-stable: the transfers are each other's transpose and G2P meets the wall \
+                              condition at the particle's foot on each wall (docs/stable_transfer.md)")]
     #[default]
     Stable,
     /// The paper's: P2G with the MLS shape function φ (eq. (6)), G2P the fit of eq. (4), with
     /// augmpm's two safety nets, the low-mass floor and the hold of particles past a wall.
+    #[schemars(description = "the paper's: P2G with the MLS shape function φ (eq. (6)), G2P the fit of eq. (4)")]
     Paper,
 }
 

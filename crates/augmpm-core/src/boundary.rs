@@ -6,6 +6,7 @@ use crate::geometry::Region;
 use crate::grid::GridLayout;
 use crate::math::{Real, Vector};
 use crate::wall::WallCondition;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// A grid node on the wall side of the region, with the condition it gets.
@@ -67,7 +68,7 @@ impl<const D: usize> NaiveBoundary<D> {
 }
 
 /// How walls act on the grid, chosen by name (`method` in scenes, the API and the CLI).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Method {
     /// Grid-node projection on the regular grid (the baseline of the paper).

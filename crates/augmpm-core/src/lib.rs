@@ -24,6 +24,7 @@ pub mod parallel;
 pub mod particles;
 pub mod scene;
 pub mod schedule;
+pub mod schema;
 pub mod solver;
 pub mod transfer;
 pub mod wall;

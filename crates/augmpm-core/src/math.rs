@@ -6,6 +6,7 @@
 //! behind [`DimOps`], implemented for `Dim<2>` and `Dim<3>`.
 
 use nalgebra::{SMatrix, SVector};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Floating-point type of the core: `f64`, or `f32` with the feature `f32` (the crate
@@ -125,10 +126,12 @@ pub fn stencil_offset<const D: usize>(mut k: usize) -> [usize; D] {
 }
 
 /// Floating-point precision: `f64` (default) or `f32`, each an engine compiled from the same sources.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Precision {
+    /// Single precision (the `augmpm-core-f32` engine).
     F32,
+    /// Double precision.
     #[default]
     F64,
 }

@@ -12,6 +12,7 @@ use crate::solver::{Boundary, Model, Simulation};
 use crate::wall::WallCondition;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// A scene that cannot be built: the key (dotted path) and why.
@@ -28,74 +29,109 @@ impl SceneError {
     }
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+// Every scene key is declared here once, with its doc line, default, range and unit: the JSON Schema
+// that `parameters::scene_schema` exports from these types is what Rust and Python validate against
+// and what the README's scene reference is generated from. Conventions: `unit` on every number
+// ("1" when dimensionless, "h" for cell widths), bounds as JSON Schema keywords, or `unbounded` for
+// a number that may be any finite value.
+
+/// The background grid.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct GridSpec {
-    /// Size of the domain box [0, Lx] × [0, Ly] (m).
+    /// Size of the domain box [0, Lx] × [0, Ly], always a wall.
+    #[schemars(extend("unit" = "m"), transform = items_positive)]
     pub domain: [Real; 2],
-    /// Cells along x; h = Lx / resolution and Ly must be a whole number of cells.
+    /// Cells along x: h = Lx / resolution; Ly must be a whole number of cells.
+    #[schemars(range(min = 2, max = 65536), extend("unit" = "cells"))]
     pub resolution: usize,
-    /// Correct the fluid density gathered next to walls for the part of the kernel that lies
-    /// in the wall (off by default, as in the paper).
+    /// Correct the fluid density gathered next to walls for the part of the kernel that lies in the
+    /// wall (for `density_estimate = "grid"`; off by default, as in the paper).
     #[serde(default)]
     pub density_wall_correction: bool,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// Time stepping: exactly one of `dt` and `cfl`, exactly one of `steps` and `end`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TimeSpec {
-    /// Time step (s); exactly one of `dt` and `cfl`.
+    /// Time step.
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "s"))]
     pub dt: Option<Real>,
-    /// Fraction of the materials' stable time step.
+    /// Time step as a fraction of the materials' stable step (one cell per step at the wave speed, and
+    /// the viscous limit).
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "maximum" = 1.0, "unit" = "1"))]
     pub cfl: Option<Real>,
-    /// Steps to run; exactly one of `steps` and `end`.
+    /// Steps to run.
     #[serde(default)]
+    #[schemars(extend("maximum" = 9_223_372_036_854_775_807u64, "unit" = "steps"))]
     pub steps: Option<u64>,
-    /// End time (s): the run takes ⌈end / dt⌉ steps (counted by the front end that runs it).
+    /// End time: the run takes ⌈end / dt⌉ steps.
     #[serde(default)]
+    #[schemars(extend("minimum" = 0.0, "unit" = "s"))]
     pub end: Option<Real>,
     /// Steps between output frames.
+    #[schemars(extend("minimum" = 1, "maximum" = 9_223_372_036_854_775_807u64, "unit" = "steps"))]
     pub output_interval: u64,
 }
 
 /// A wall; the domain box is always one more.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
 pub enum WallSpec {
-    /// Closed polygon, counter-clockwise, material inside.
+    /// A closed polygon, counter-clockwise, material inside (a container).
+    #[schemars(title = "PolygonWall")]
     Polygon {
+        /// Corners, counter-clockwise; the first may be repeated at the end.
+        #[schemars(length(min = 3), extend("unit" = "m", "unbounded" = true))]
         vertices: Vec<[Real; 2]>,
+        /// This wall's condition (default: the scene's `wall_condition`).
         #[serde(default)]
         condition: Option<WallCondition>,
-        /// Velocity of the wall surface (m/s); only its part along the wall acts.
+        /// Velocity of the wall's surface; only its part along the wall acts (the wall stays put).
         #[serde(default)]
+        #[schemars(extend("unit" = "m/s", "unbounded" = true))]
         velocity: [Real; 2],
-        /// Speed (m/s) of the surface along the polygon, counter-clockwise (a belt loop).
+        /// Speed of the surface counter-clockwise along the polygon (a belt loop).
         #[serde(default)]
+        #[schemars(extend("unit" = "m/s", "unbounded" = true))]
         tangential_speed: Real,
     },
-    /// Circle, material `outside` (an obstacle, the default) or `inside` (a container).
+    /// A circle, material `outside` it (an obstacle, the default) or `inside` it (a container).
+    #[schemars(title = "CircleWall")]
     Circle {
+        /// Centre.
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
         center: [Real; 2],
+        /// Radius.
+        #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "m"))]
         radius: Real,
+        /// Where the material is: `outside` the circle (an obstacle) or `inside` (a container).
         #[serde(default = "default_side")]
         side: SideSpec,
+        /// This wall's condition (default: the scene's `wall_condition`).
         #[serde(default)]
         condition: Option<WallCondition>,
+        /// Velocity of the wall's surface; only its part along the wall acts (the wall stays put).
         #[serde(default)]
+        #[schemars(extend("unit" = "m/s", "unbounded" = true))]
         velocity: [Real; 2],
-        /// Surface speed (m/s) counter-clockwise around the centre (a spinning cylinder).
+        /// Speed of the surface counter-clockwise around the centre (a spinning cylinder).
         #[serde(default)]
+        #[schemars(extend("unit" = "m/s", "unbounded" = true))]
         tangential_speed: Real,
     },
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+/// Which side of a circle wall the material is on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum SideSpec {
+    /// Around the circle: an obstacle.
     Outside,
+    /// In the circle: a container.
     Inside,
 }
 
@@ -104,23 +140,42 @@ fn default_side() -> SideSpec {
 }
 
 /// Geometry of a body.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "shape", rename_all = "lowercase")]
 pub enum BodyShape {
-    /// Polygon in a local frame, placed at `center + scale · vertex`.
+    /// A polygon in a local frame, placed at `center + scale · vertex`; counter-clockwise.
+    #[schemars(title = "PolygonBody")]
     Polygon {
+        /// Corners in the local frame, counter-clockwise.
+        #[schemars(length(min = 3), extend("unit" = "m", "unbounded" = true))]
         vertices: Vec<[Real; 2]>,
+        /// Scale of the local frame.
         #[serde(default = "one")]
+        #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "1"))]
         scale: Real,
+        /// Where the local frame's origin goes.
         #[serde(default)]
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
         center: [Real; 2],
     },
+    /// An axis-aligned box.
+    #[schemars(title = "BoxBody")]
     Box {
+        /// Lower-left corner.
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
         min: [Real; 2],
+        /// Upper-right corner, above and right of `min`.
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
         max: [Real; 2],
     },
+    /// A disk.
+    #[schemars(title = "CircleBody")]
     Circle {
+        /// Centre.
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
         center: [Real; 2],
+        /// Radius.
+        #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "m"))]
         radius: Real,
     },
 }
@@ -129,74 +184,97 @@ fn one() -> Real {
     1.0
 }
 
-/// Jittered-grid seeding: one random point per square of side `spacing` (m),
-/// or `per_cell` points per grid cell on average (spacing h/√per_cell).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+/// Jittered-grid seeding: one random point per square of side `spacing`, or `per_cell` points per
+/// grid cell on average (spacing h/√per_cell); 4 per cell when neither is given.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Seeding {
+    /// Side of the squares that get one particle each.
     #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "m"))]
     pub spacing: Option<Real>,
+    /// Particles per grid cell, on average.
     #[serde(default)]
+    #[schemars(range(min = 1, max = 1024), extend("unit" = "1"))]
     pub per_cell: Option<u32>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// A body of material: a shape, its material, its initial velocity and how it is seeded.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct BodySpec {
     #[serde(flatten)]
     pub shape: BodyShape,
+    /// The body's material, chosen by `type`.
     pub material: Material,
-    /// Initial velocity (m/s).
+    /// Initial velocity.
     #[serde(default)]
+    #[schemars(extend("unit" = "m/s", "unbounded" = true))]
     pub velocity: [Real; 2],
+    /// How particles are placed in the body.
     #[serde(default)]
     pub seeding: Seeding,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// A scene: the grid, time stepping, walls and bodies, and how walls act on the grid.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Scene {
+    /// Name of the scene, shown in progress bars and reports.
     #[serde(default)]
     pub name: String,
     /// Seed of the particle jitter; the same seed gives the same particles.
     #[serde(default)]
+    #[schemars(extend("maximum" = 18_446_744_073_709_551_615u64, "unit" = "1"))]
     pub seed: u64,
-    /// Gravity (m/s²).
+    /// Gravity.
+    #[serde(default = "default_gravity")]
+    #[schemars(extend("unit" = "m/s²", "unbounded" = true))]
     pub gravity: [Real; 2],
+    /// The background grid.
     pub grid: GridSpec,
+    /// Time stepping.
     pub time: TimeSpec,
-    /// How walls act on the grid: `augmented` (default) or `naive`. The method given to
-    /// [`Scene::build`] is the one that runs; front ends pass this one unless told otherwise.
+    /// How walls act on the grid; `Simulation(scene, method)` and `--method` override it.
     #[serde(default)]
     pub method: Method,
     /// Condition of every wall (and the domain box) unless a wall names its own.
     #[serde(default)]
     pub wall_condition: WallCondition,
+    /// The walls besides the domain box: polygons (material inside) and circles.
     #[serde(default)]
     pub walls: Vec<WallSpec>,
+    /// The bodies of material: a run needs at least one; the walls of a scene without bodies can be
+    /// studied on their own (`augmpm._core.Grid`).
     #[serde(default)]
     pub bodies: Vec<BodySpec>,
+    /// Settings of the augmented grid (`method = "augmented"`).
     #[serde(default)]
     pub augmented: AugmentedSpec,
-    /// Floating-point precision of the engine that runs the scene.
+    /// Floating-point precision of the engine: the same code in double or single precision.
     #[serde(default)]
     pub precision: Precision,
 }
 
 /// Settings of the augmented grid (`method = "augmented"`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct AugmentedSpec {
-    /// Exclusion distance δ in cell widths: regular nodes closer than δ·h to a wall (or
-    /// outside the material) are dropped from the interpolation (Fig. 3 of the paper).
+    /// Exclusion distance δ: regular nodes closer than δ·h to a wall (or outside the material) are
+    /// dropped from the interpolation (Fig. 3 of the paper; its δ = h/4).
     #[serde(default = "default_delta")]
+    #[schemars(extend("minimum" = 0.0, "exclusiveMaximum" = 1.5, "unit" = "h"))]
     pub delta: Real,
-    /// Largest spacing of the boundary points along a wall, in cell widths.
+    /// Largest spacing of the boundary points along a wall.
     #[serde(default = "default_spacing")]
+    #[schemars(extend("exclusiveMinimum" = 0.05, "maximum" = 1.0, "unit" = "h"))]
     pub spacing: Real,
-    /// How particles and the augmented grid exchange mass and momentum: `stable` (default) or
-    /// `paper` (the paper's φ-weighted transfer with augmpm's safety nets).
+    /// How particles and the augmented grid exchange mass and momentum.
     #[serde(default)]
     pub transfer: AugmentedTransfer,
+}
+
+fn default_gravity() -> [Real; 2] {
+    [0.0, -9.81]
 }
 
 fn default_spacing() -> Real {
@@ -210,6 +288,13 @@ fn default_delta() -> Real {
 impl Default for AugmentedSpec {
     fn default() -> Self {
         Self { delta: default_delta(), spacing: default_spacing(), transfer: AugmentedTransfer::default() }
+    }
+}
+
+/// Bounds every item of a vector to be positive (a transform of its schema).
+fn items_positive(schema: &mut schemars::Schema) {
+    if let Some(items) = schema.get_mut("items").and_then(|i| i.as_object_mut()) {
+        items.insert("exclusiveMinimum".into(), 0.0.into());
     }
 }
 
@@ -325,8 +410,54 @@ fn checked_polygon(key: &str, mut vertices: Vec<Point>) -> Result<Polygon, Scene
 
 impl Scene {
     /// Parses the JSON form of a resolved scene.
+    /// Checked against [`Scene::schema`] first, so that an error names the key (`bodies[0].radius`),
+    /// then by [`Scene::validate`].
     pub fn from_json(text: &str) -> Result<Self, SceneError> {
-        serde_json::from_str(text).map_err(|e| SceneError::new("scene", e.to_string()))
+        let value: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| SceneError::new("scene", format!("not valid JSON: {e}")))?;
+        crate::schema::check(Self::schema(), &value).map_err(|e| SceneError::new(e.key, e.reason))?;
+        let scene: Self = serde_json::from_value(value).map_err(|e| SceneError::new("scene", e.to_string()))?;
+        scene.validate()?;
+        Ok(scene)
+    }
+
+    /// The JSON Schema of scenes, derived from these types: every key with its doc line (`description`),
+    /// default, range (JSON Schema bounds, or `unbounded`) and `unit`. The Python package builds its
+    /// scene models from it and the README's scene reference is generated from it.
+    pub fn schema() -> &'static serde_json::Value {
+        static SCHEMA: std::sync::OnceLock<serde_json::Value> = std::sync::OnceLock::new();
+        SCHEMA.get_or_init(|| serde_json::to_value(schemars::schema_for!(Scene)).expect("the schema is JSON"))
+    }
+
+    /// Checks everything that needs no geometry: each key against [`Scene::schema`] (types, ranges,
+    /// finite numbers, unknown keys), then the rules that tie keys together (one of `time.dt` and
+    /// `time.cfl`, a whole number of cells, ...). [`Scene::build`] calls it first.
+    pub fn validate(&self) -> Result<(), SceneError> {
+        // A scene built in code may hold a NaN or an infinity, which JSON writes as null: refused below.
+        let value = serde_json::to_value(self).map_err(|e| SceneError::new("scene", e.to_string()))?;
+        crate::schema::check(Self::schema(), &value).map_err(|e| SceneError::new(e.key, e.reason))?;
+        self.layout_unchecked()?;
+        let t = &self.time;
+        if t.steps.is_some() == t.end.is_some() {
+            return Err(SceneError::new("time", "give exactly one of steps and end"));
+        }
+        match (t.dt, t.cfl) {
+            (Some(_), Some(_)) | (None, None) => return Err(SceneError::new("time", "give exactly one of dt and cfl")),
+            _ => {}
+        }
+        for (b, body) in self.bodies.iter().enumerate() {
+            let key = format!("bodies[{b}]");
+            if body.seeding.spacing.is_some() && body.seeding.per_cell.is_some() {
+                return Err(SceneError::new(format!("{key}.seeding"), "give spacing or per_cell, not both"));
+            }
+            if let BodyShape::Box { min, max } = &body.shape {
+                if max[0] <= min[0] || max[1] <= min[1] {
+                    return Err(SceneError::new(format!("{key}.max"), "must exceed min along both axes"));
+                }
+            }
+            body.material.validate().map_err(|(k, reason)| SceneError::new(format!("{key}.material.{k}"), reason))?;
+        }
+        Ok(())
     }
 
     /// Cell width h (m).
@@ -334,17 +465,18 @@ impl Scene {
         self.grid.domain[0] / self.grid.resolution as Real
     }
 
-    fn layout(&self) -> Result<GridLayout<2>, SceneError> {
+    /// The grid of a scene whose keys are in range (`validate`).
+    fn layout_unchecked(&self) -> Result<GridLayout<2>, SceneError> {
         let g = &self.grid;
-        finite("grid.domain", &g.domain)?;
-        if g.domain.iter().any(|&l| l <= 0.0) {
-            return Err(SceneError::new("grid.domain", "both sizes must be positive"));
-        }
-        if g.resolution < 2 {
-            return Err(SceneError::new("grid.resolution", format!("must be at least 2, got {}", g.resolution)));
-        }
         let h = self.cell_size();
         let ny = g.domain[1] / h;
+        if !ny.is_finite() {
+            // h underflows to 0 for a subnormal width.
+            return Err(SceneError::new(
+                "grid.domain",
+                format!("height {} is not a finite number of cells of width {h}", g.domain[1]),
+            ));
+        }
         if (ny - ny.round()).abs() > 1e-9 * ny.max(1.0) || ny.round() < 2.0 {
             return Err(SceneError::new(
                 "grid.domain",
@@ -385,13 +517,6 @@ impl Scene {
                     (WallShape::Polygon(poly), condition, (velocity, tangential_speed, None))
                 }
                 WallSpec::Circle { center, radius, side, condition, velocity, tangential_speed } => {
-                    finite(&format!("{key}.center"), center)?;
-                    if !(radius.is_finite() && *radius > 0.0) {
-                        return Err(SceneError::new(
-                            format!("{key}.radius"),
-                            format!("must be positive, got {radius}"),
-                        ));
-                    }
                     let r = Point::repeat(*radius);
                     if !(near_box(&(point(center) - r)) && near_box(&(point(center) + r))) {
                         return Err(far());
@@ -405,8 +530,6 @@ impl Scene {
                 }
             };
             let (velocity, speed, center) = velocity;
-            finite(&format!("{key}.velocity"), velocity)?;
-            finite(&format!("{key}.tangential_speed"), &[*speed])?;
             shapes.push(shape);
             conditions.push(condition.unwrap_or(self.wall_condition));
             motions.push(SurfaceMotion { velocity: point(velocity), tangential_speed: *speed, center });
@@ -416,24 +539,10 @@ impl Scene {
         Ok((Walls2::new(shapes, extent).with_motions(motions), conditions))
     }
 
+    /// The time step (s) of a validated scene, and a warning when `time.dt` exceeds the stable bound.
     fn dt(&self, model_stable_dt: Real) -> Result<(Real, Option<String>), SceneError> {
-        let t = &self.time;
-        if t.output_interval == 0 {
-            return Err(SceneError::new("time.output_interval", "must be at least 1"));
-        }
-        match (t.steps, t.end) {
-            (Some(_), None) => {}
-            (None, Some(end)) if end.is_finite() && end >= 0.0 => {}
-            (None, Some(end)) => {
-                return Err(SceneError::new("time.end", format!("must be a non-negative time (s), got {end}")))
-            }
-            _ => return Err(SceneError::new("time", "give exactly one of steps and end")),
-        }
-        match (t.dt, t.cfl) {
-            (Some(dt), None) => {
-                if !(dt.is_finite() && dt > 0.0) {
-                    return Err(SceneError::new("time.dt", format!("must be positive, got {dt}")));
-                }
+        match (self.time.dt, self.time.cfl) {
+            (Some(dt), _) => {
                 let warning = (dt > model_stable_dt).then(|| {
                     format!(
                         "time.dt = {dt:e} s exceeds the stable bound {model_stable_dt:e} s of the materials \
@@ -442,11 +551,8 @@ impl Scene {
                 });
                 Ok((dt, warning))
             }
-            (None, Some(cfl)) => {
-                if !(cfl.is_finite() && cfl > 0.0 && cfl <= 1.0) {
-                    return Err(SceneError::new("time.cfl", format!("must lie in (0, 1], got {cfl}")));
-                }
-                let dt = cfl * model_stable_dt;
+            (None, cfl) => {
+                let dt = cfl.unwrap_or(1.0) * model_stable_dt;
                 if !(dt.is_finite() && dt > 0.0) {
                     return Err(SceneError::new(
                         "time.cfl",
@@ -455,14 +561,13 @@ impl Scene {
                 }
                 Ok((dt, None))
             }
-            (Some(_), Some(_)) => Err(SceneError::new("time", "give either dt or cfl, not both")),
-            (None, None) => Err(SceneError::new("time", "give dt or cfl")),
         }
     }
 
     /// The grid, the material region and the walls' boundary handling, without bodies.
     pub fn build_walls(&self, method: Method) -> Result<(GridLayout<2>, Walls2, Boundary<2>), SceneError> {
-        let layout = self.layout()?;
+        self.validate()?;
+        let layout = self.layout_unchecked()?;
         let h = layout.h;
         let extent = Point::new(layout.extent()[0], layout.extent()[1]);
         let (region, conditions) = self.walls(extent)?;
@@ -470,20 +575,7 @@ impl Scene {
         let boundary = match method {
             Method::Naive => Boundary::Naive(NaiveBoundary::new(&layout, &region, conditions, surface)),
             Method::Augmented => {
-                let delta = self.augmented.delta;
-                if !(delta.is_finite() && (0.0..1.5).contains(&delta)) {
-                    return Err(SceneError::new(
-                        "augmented.delta",
-                        format!("must lie in [0, 1.5) cell widths, got {delta}"),
-                    ));
-                }
-                let spacing = self.augmented.spacing;
-                if !(spacing.is_finite() && spacing > 0.05 && spacing <= 1.0) {
-                    return Err(SceneError::new(
-                        "augmented.spacing",
-                        format!("must lie in (0.05, 1] cell widths, got {spacing}"),
-                    ));
-                }
+                let (delta, spacing) = (self.augmented.delta, self.augmented.spacing);
                 let mut points = region.boundary_points(spacing * h);
                 for p in &mut points {
                     p.velocity = surface(p.wall, &p.x, &p.normals[0]);
@@ -500,7 +592,8 @@ impl Scene {
     /// Estimates the memory the simulation of this scene will take, without building it. Bodies
     /// whose shape or seeding is invalid count no particles (building reports them).
     pub fn memory_estimate(&self) -> Result<MemoryEstimate, SceneError> {
-        let layout = self.layout()?;
+        self.validate()?;
+        let layout = self.layout_unchecked()?;
         let nodes = layout.num_nodes() as u64;
         let h = layout.h;
         let domain_area = self.grid.domain[0] * self.grid.domain[1];
@@ -551,7 +644,6 @@ impl Scene {
                 format!("this engine runs {:?} scenes, not {:?}", Precision::NATIVE, self.precision),
             ));
         }
-        finite("gravity", &self.gravity)?;
         let (layout, region, boundary) = self.build_walls(method)?;
         let h = layout.h;
         if self.bodies.is_empty() {
@@ -561,8 +653,6 @@ impl Scene {
         let mut particles = Particles::<2>::default();
         for (b, body) in self.bodies.iter().enumerate() {
             let key = format!("bodies[{b}]");
-            body.material.validate().map_err(|(k, reason)| SceneError::new(format!("{key}.material.{k}"), reason))?;
-            finite(&format!("{key}.velocity"), &body.velocity)?;
             materials.push(body.material.clone());
             let first = particles.len();
             seed_body(&key, body, b, self.seed, h, &mut particles)?;
@@ -620,11 +710,9 @@ impl Scene {
 fn seeding_spacing(key: &str, body: &BodySpec, h: Real) -> Result<Real, SceneError> {
     match (body.seeding.spacing, body.seeding.per_cell) {
         (Some(s), None) if s.is_finite() && s > 0.0 => Ok(s),
-        (Some(s), None) => Err(SceneError::new(format!("{key}.seeding.spacing"), format!("must be positive, got {s}"))),
         (None, Some(n)) if n > 0 => Ok(h / (n as Real).sqrt()),
-        (None, Some(_)) => Err(SceneError::new(format!("{key}.seeding.per_cell"), "must be at least 1")),
         (None, None) => Ok(h / 2.0),
-        (Some(_), Some(_)) => Err(SceneError::new(format!("{key}.seeding"), "give spacing or per_cell, not both")),
+        _ => Err(SceneError::new(format!("{key}.seeding"), "give one positive spacing or per_cell")),
     }
 }
 
@@ -642,10 +730,6 @@ fn seed_body(
     type ShapeInfo = (Real, Point, Point, Box<dyn Fn(&Point) -> bool>);
     let (area, lo, hi, inside): ShapeInfo = match &body.shape {
         BodyShape::Polygon { vertices, scale, center } => {
-            if !(scale.is_finite() && *scale > 0.0) {
-                return Err(SceneError::new(format!("{key}.scale"), format!("must be positive, got {scale}")));
-            }
-            finite(&format!("{key}.center"), center)?;
             let c = point(center);
             let poly =
                 checked_polygon(&format!("{key}.vertices"), vertices.iter().map(|v| c + point(v) * *scale).collect())?;
@@ -654,20 +738,11 @@ fn seed_body(
             (poly.signed_area(), lo, hi, Box::new(move |p| poly.contains(p)))
         }
         BodyShape::Box { min, max } => {
-            finite(&format!("{key}.min"), min)?;
-            finite(&format!("{key}.max"), max)?;
             let (lo, hi) = (point(min), point(max));
-            if hi.x <= lo.x || hi.y <= lo.y {
-                return Err(SceneError::new(format!("{key}.max"), "must exceed min along both axes"));
-            }
             let area = (hi.x - lo.x) * (hi.y - lo.y);
             (area, lo, hi, Box::new(move |p| p.x >= lo.x && p.x < hi.x && p.y >= lo.y && p.y < hi.y))
         }
         BodyShape::Circle { center, radius } => {
-            finite(&format!("{key}.center"), center)?;
-            if !(radius.is_finite() && *radius > 0.0) {
-                return Err(SceneError::new(format!("{key}.radius"), format!("must be positive, got {radius}")));
-            }
             let circle = Circle { center: point(center), radius: *radius };
             let r = Point::repeat(*radius);
             let area = crate::math::PI * radius * radius;

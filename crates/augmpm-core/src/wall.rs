@@ -2,10 +2,11 @@
 //! velocity at one or two normals, and the points sampled along it that join the augmented grid.
 
 use crate::math::{Real, Vector};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// What a wall does to the velocity of the material against it.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum WallCondition {
     /// No-slip: the velocity equals the wall's.

@@ -5,6 +5,7 @@
 
 mod errors;
 mod grid;
+mod scene;
 
 use augmpm_core::Method;
 use numpy::{PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
@@ -502,6 +503,8 @@ fn _panic(message: String, threads: usize) -> PyResult<()> {
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     errors::install_panic_hook();
     m.add_function(wrap_pyfunction!(_panic, m)?)?;
+    m.add_function(wrap_pyfunction!(scene::scene_schema, m)?)?;
+    m.add_function(wrap_pyfunction!(scene::check_scene, m)?)?;
     m.add_class::<PySimulation>()?;
     m.add_class::<grid::PyGrid>()?;
     errors::register(m)?;

@@ -1,25 +1,23 @@
 //! Fixed-corotated hyperelasticity (Stomakhin et al. 2012).
 
-use super::{advance_f, elastic_dt, lame, validate_solid, ConstitutiveModel, MaterialPoint};
+use super::{advance_f, elastic_dt, lame, ConstitutiveModel, MaterialPoint};
 use crate::math::{Dim, DimOps, Matrix, Real};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Elastic solid with Kirchhoff stress `τ = 2μ(F − R)Fᵀ + λ(J − 1)J I`, R the rotation of F.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FixedCorotated {
-    /// Rest density (kg/m³, or kg/m² in 2D).
+    /// Rest density ρ0 (per unit area in 2D).
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "kg/m²"))]
     pub density: Real,
-    /// Young's modulus E (Pa).
+    /// Young's modulus E (a stress: N/m in 2D, Pa in 3D).
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "N/m"))]
     pub youngs_modulus: Real,
-    /// Poisson's ratio ν, in (−1, 0.5).
+    /// Poisson's ratio ν.
+    #[schemars(extend("exclusiveMinimum" = -1.0, "exclusiveMaximum" = 0.5, "unit" = "1"))]
     pub poisson_ratio: Real,
-}
-
-impl FixedCorotated {
-    pub(super) fn validate(&self) -> Result<(), (&'static str, String)> {
-        validate_solid(self.density, self.youngs_modulus, self.poisson_ratio)
-    }
 }
 
 /// Kirchhoff stress of the fixed-corotated model with Lamé parameters `mu`, `lambda` (Pa).

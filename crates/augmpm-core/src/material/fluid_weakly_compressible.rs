@@ -1,42 +1,52 @@
 //! Weakly compressible Newtonian fluid (Tait-like equation of state), the
 //! fluid of Toyota & Umetani 2024 after the MPM guide they cite.
 
-use super::{non_negative, positive, ConstitutiveModel, MaterialPoint};
+use super::{ConstitutiveModel, MaterialPoint};
 use crate::math::{Matrix, Real};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Where a fluid particle's density comes from (`density_estimate` in scene files).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum DensityEstimate {
     /// From the particle's own volume change: ρ = ρ0 / J with J̇ = J tr(∇v), J kept in the
     /// particle's `jp` (Hu et al. 2018's fluid) and smoothed over the grid each step (J-bar,
     /// [`crate::transfer::smooth_volume_ratio`]). Smooth, so a column at rest is not rectified by
     /// the p ≥ 0 clamp, and unbiased next to walls and free surfaces.
+    #[schemars(
+        description = "ρ = ρ0/J from the particle's own volume change, smoothed over the grid each step (J-bar)"
+    )]
     #[default]
     Deformation,
     /// Gathered from the particle masses scattered to the regular grid (the paper's choice):
     /// ρ_p = Σ w_ip m_i / h^D.
+    #[schemars(description = "ρ gathered from the particle masses scattered to the regular grid (the paper's)")]
     Grid,
 }
 
 /// `p = k((ρ/ρ0)^γ − 1)`, clamped below at `min_pressure`, and
 /// `σ = −p I + μ(∇v + ∇vᵀ)`; ρ as `density_estimate` says.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WeaklyCompressibleFluid {
-    /// Rest density ρ0 (kg/m³, or kg/m² in 2D).
+    /// Rest density ρ0 (per unit area in 2D).
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "kg/m²"))]
     pub density: Real,
-    /// EOS stiffness k (Pa).
+    /// Stiffness k of the equation of state (a stress: N/m in 2D, Pa in 3D).
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "N/m"))]
     pub stiffness: Real,
-    /// EOS exponent γ.
+    /// Exponent γ of the equation of state.
     #[serde(default = "default_gamma")]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "1"))]
     pub gamma: Real,
-    /// Dynamic viscosity μ (Pa·s).
+    /// Dynamic viscosity μ (N·s/m in 2D, Pa·s in 3D).
     #[serde(default)]
+    #[schemars(extend("minimum" = 0.0, "unit" = "N·s/m"))]
     pub viscosity: Real,
-    /// Lowest pressure (Pa); a small negative value allows mild tension.
+    /// Lowest pressure; a small negative value allows mild tension.
     #[serde(default)]
+    #[schemars(extend("maximum" = 0.0, "unit" = "N/m"))]
     pub min_pressure: Real,
     /// Where the density comes from.
     #[serde(default)]
@@ -80,17 +90,6 @@ impl WeaklyCompressibleFluid {
     /// Cauchy stress (Pa) at density `rho` and velocity gradient `grad_v` (1/s).
     pub fn cauchy_stress<const D: usize>(&self, rho: Real, grad_v: &Matrix<D>) -> Matrix<D> {
         Matrix::<D>::identity() * -self.pressure(rho) + (grad_v + grad_v.transpose()) * self.viscosity
-    }
-
-    pub(super) fn validate(&self) -> Result<(), (&'static str, String)> {
-        positive("density", self.density)?;
-        positive("stiffness", self.stiffness)?;
-        positive("gamma", self.gamma)?;
-        non_negative("viscosity", self.viscosity)?;
-        if !self.min_pressure.is_finite() || self.min_pressure > 0.0 {
-            return Err(("min_pressure", format!("must be finite and <= 0, got {}", self.min_pressure)));
-        }
-        Ok(())
     }
 }
 

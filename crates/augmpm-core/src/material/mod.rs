@@ -13,6 +13,7 @@ pub use snow_stomakhin2013::SnowStomakhin2013;
 pub use stvk::StVenantKirchhoff;
 
 use crate::math::{Dim, DimOps, Matrix, Real};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// What a constitutive model may read of one particle.
@@ -87,12 +88,6 @@ fn elastic_dt(h: Real, density: Real, youngs_modulus: Real, poisson_ratio: Real)
 }
 
 /// Checks the density and elastic moduli every solid model has.
-fn validate_solid(density: Real, youngs_modulus: Real, poisson_ratio: Real) -> Result<(), (&'static str, String)> {
-    positive("density", density)?;
-    positive("youngs_modulus", youngs_modulus)?;
-    poisson(poisson_ratio)
-}
-
 /// `F ← (I + dt ∇v) F`, the MLS-MPM deformation update.
 #[inline]
 pub(crate) fn advance_f<const D: usize>(f: &mut Matrix<D>, grad_v: &Matrix<D>, dt: Real) {
@@ -100,12 +95,21 @@ pub(crate) fn advance_f<const D: usize>(f: &mut Matrix<D>, grad_v: &Matrix<D>, d
 }
 
 /// The materials a scene can name, chosen by the tag `type`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
 pub enum Material {
+    /// Weakly compressible Newtonian fluid: p = k((ρ/ρ0)^γ − 1) clamped below at `min_pressure`,
+    /// σ = −pI + μ(∇v + ∇vᵀ).
+    #[schemars(title = "Fluid")]
     Fluid(WeaklyCompressibleFluid),
+    /// Fixed-corotated hyperelastic solid (Stomakhin et al. 2012).
+    #[schemars(title = "Elastic")]
     Elastic(FixedCorotated),
+    /// St. Venant–Kirchhoff hyperelastic solid.
+    #[schemars(title = "Stvk")]
     Stvk(StVenantKirchhoff),
+    /// Snow: fixed-corotated with clamped singular values and hardening (Stomakhin et al. 2013).
+    #[schemars(title = "Snow")]
     Snow(SnowStomakhin2013),
 }
 
@@ -120,13 +124,12 @@ impl Material {
         }
     }
 
-    /// Checks the parameters; returns the offending key and the reason.
+    /// Checks the rules that tie a model's keys together (each key's own range is in the scene schema);
+    /// returns the offending key and the reason.
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
         match self {
-            Material::Fluid(m) => m.validate(),
-            Material::Elastic(m) => m.validate(),
-            Material::Stvk(m) => m.validate(),
             Material::Snow(m) => m.validate(),
+            _ => Ok(()),
         }
     }
 }
@@ -169,32 +172,5 @@ where
     }
     fn stable_dt(&self, h: Real) -> Real {
         dispatch!(self, m => ConstitutiveModel::<D>::stable_dt(m, h))
-    }
-}
-
-/// Requires `value > 0` and finite.
-pub(crate) fn positive(key: &'static str, value: Real) -> Result<(), (&'static str, String)> {
-    if value.is_finite() && value > 0.0 {
-        Ok(())
-    } else {
-        Err((key, format!("must be a positive finite number, got {value}")))
-    }
-}
-
-/// Requires `value >= 0` and finite.
-pub(crate) fn non_negative(key: &'static str, value: Real) -> Result<(), (&'static str, String)> {
-    if value.is_finite() && value >= 0.0 {
-        Ok(())
-    } else {
-        Err((key, format!("must be a non-negative finite number, got {value}")))
-    }
-}
-
-/// Requires a Poisson ratio in (−1, 0.5).
-pub(crate) fn poisson(value: Real) -> Result<(), (&'static str, String)> {
-    if value.is_finite() && value > -1.0 && value < 0.5 {
-        Ok(())
-    } else {
-        Err(("poisson_ratio", format!("must lie in (-1, 0.5), got {value}")))
     }
 }

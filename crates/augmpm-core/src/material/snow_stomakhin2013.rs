@@ -2,36 +2,45 @@
 //! simulation") on the fixed-corotated model.
 
 use super::fixed_corotated::kirchhoff;
-use super::{advance_f, elastic_dt, lame, positive, validate_solid, ConstitutiveModel, MaterialPoint};
+use super::{advance_f, elastic_dt, lame, ConstitutiveModel, MaterialPoint};
 use crate::math::{Dim, DimOps, Matrix, Real};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Singular values of the elastic F are clamped to `[1 − θc, 1 + θs]` each step;
 /// the excess goes to the plastic volume ratio J_p, which hardens the Lamé
 /// parameters by `exp(ξ(1 − J_p))`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SnowStomakhin2013 {
-    /// Rest density (kg/m³, or kg/m² in 2D).
+    /// Rest density ρ0 (per unit area in 2D).
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "kg/m²"))]
     pub density: Real,
-    /// Young's modulus E (Pa).
+    /// Young's modulus E (a stress: N/m in 2D, Pa in 3D).
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "N/m"))]
     pub youngs_modulus: Real,
-    /// Poisson's ratio ν, in (−1, 0.5).
+    /// Poisson's ratio ν.
+    #[schemars(extend("exclusiveMinimum" = -1.0, "exclusiveMaximum" = 0.5, "unit" = "1"))]
     pub poisson_ratio: Real,
-    /// Critical compression θc.
+    /// Critical compression θc: singular values of the elastic F below 1 − θc become plastic.
     #[serde(default = "default_compression")]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "exclusiveMaximum" = 1.0, "unit" = "1"))]
     pub critical_compression: Real,
-    /// Critical stretch θs.
+    /// Critical stretch θs: singular values above 1 + θs become plastic.
     #[serde(default = "default_stretch")]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "1"))]
     pub critical_stretch: Real,
-    /// Hardening coefficient ξ.
+    /// Hardening coefficient ξ: the Lamé parameters scale by exp(ξ(1 − J_p)).
     #[serde(default = "default_hardening")]
+    #[schemars(extend("minimum" = 0.0, "unit" = "1"))]
     pub hardening: Real,
-    /// Lower clamp of J_p.
+    /// Lower clamp of the plastic volume ratio J_p.
     #[serde(default = "default_jp_min")]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "1"))]
     pub jp_min: Real,
-    /// Upper clamp of J_p.
+    /// Upper clamp of the plastic volume ratio J_p (greater than `jp_min`).
     #[serde(default = "default_jp_max")]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "1"))]
     pub jp_max: Real,
 }
 
@@ -52,18 +61,10 @@ fn default_jp_max() -> Real {
 }
 
 impl SnowStomakhin2013 {
+    /// The rule between keys: J_p's clamps in order.
     pub(super) fn validate(&self) -> Result<(), (&'static str, String)> {
-        validate_solid(self.density, self.youngs_modulus, self.poisson_ratio)?;
-        if !(self.critical_compression > 0.0 && self.critical_compression < 1.0) {
-            return Err(("critical_compression", format!("must lie in (0, 1), got {}", self.critical_compression)));
-        }
-        positive("critical_stretch", self.critical_stretch)?;
-        if !(self.hardening.is_finite() && self.hardening >= 0.0) {
-            return Err(("hardening", format!("must be a non-negative finite number, got {}", self.hardening)));
-        }
-        positive("jp_min", self.jp_min)?;
-        if !(self.jp_max.is_finite() && self.jp_max > self.jp_min) {
-            return Err(("jp_max", format!("must be finite and greater than jp_min, got {}", self.jp_max)));
+        if self.jp_max <= self.jp_min {
+            return Err(("jp_max", format!("must be greater than jp_min ({}), got {}", self.jp_min, self.jp_max)));
         }
         Ok(())
     }

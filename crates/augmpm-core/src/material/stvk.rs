@@ -1,26 +1,24 @@
 //! St. Venant–Kirchhoff hyperelasticity.
 
-use super::{advance_f, elastic_dt, lame, validate_solid, ConstitutiveModel, MaterialPoint};
+use super::{advance_f, elastic_dt, lame, ConstitutiveModel, MaterialPoint};
 use crate::math::{Matrix, Real};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Green strain `E = ½(FᵀF − I)`, second Piola–Kirchhoff stress `S = 2μE + λ tr(E) I`,
 /// Kirchhoff stress `τ = F S Fᵀ`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct StVenantKirchhoff {
-    /// Rest density (kg/m³, or kg/m² in 2D).
+    /// Rest density ρ0 (per unit area in 2D).
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "kg/m²"))]
     pub density: Real,
-    /// Young's modulus E (Pa).
+    /// Young's modulus E (a stress: N/m in 2D, Pa in 3D).
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "N/m"))]
     pub youngs_modulus: Real,
-    /// Poisson's ratio ν, in (−1, 0.5).
+    /// Poisson's ratio ν.
+    #[schemars(extend("exclusiveMinimum" = -1.0, "exclusiveMaximum" = 0.5, "unit" = "1"))]
     pub poisson_ratio: Real,
-}
-
-impl StVenantKirchhoff {
-    pub(super) fn validate(&self) -> Result<(), (&'static str, String)> {
-        validate_solid(self.density, self.youngs_modulus, self.poisson_ratio)
-    }
 }
 
 impl<const D: usize> ConstitutiveModel<D> for StVenantKirchhoff {
