@@ -1,5 +1,6 @@
-"""Bitwise guard: the paper's scenes (both methods, as shipped: the paper's transfer and density) and the
-128² bench dam break (the defaults) reach exactly the same state as when these digests were recorded.
+"""Bitwise guard: the paper's scenes (both methods, as shipped: the paper's transfer and density), the
+128² bench dam break (the defaults) and the validation cases (at 30°, coarse) reach exactly the same state
+as when these digests were recorded.
 A restructuring must leave them unchanged; a change of results updates them in its own commit, saying why.
 The digests hold for the machine kind CI runs on (x86-64 Linux, its C maths library: exp and pow enter the
 materials and the stable transfer's weights).
@@ -8,12 +9,14 @@ materials and the stable transfer's weights).
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Callable
 
 import numpy as np
 import pytest
 
 import augmpm
 from augmpm import bench
+from augmpm.validation import channel, dam_break, hydrostatic, incline, rotation
 
 from .conftest import SCENES
 
@@ -37,6 +40,43 @@ DIGESTS = {
 #: Steps run: the paper's bodies reach the walls after about 500 steps.
 PAPER_STEPS, BENCH_STEPS = 2000, 300
 
+#: The validation cases' scenes (`augmpm validate --quick` resolutions, at 30° to the grid) by name.
+VALIDATION_SCENES: dict[str, Callable[[], dict]] = {
+    "poiseuille": lambda: channel._scene("poiseuille", 30.0, 16)[0],
+    "couette": lambda: channel._scene("couette", 30.0, 16)[0],
+    "dam_break": lambda: dam_break._scene(30.0, 12)[0],
+    "incline": lambda: incline._scene(30.0, 64)[0],
+    **{
+        case: (lambda density=density, corrected=corrected: hydrostatic._scene(30.0, 64, corrected, density)[0])
+        for case, density, corrected, _ in hydrostatic.VARIANTS
+    },
+    "rotation_fullslip": lambda: rotation._scene("slip", 64),
+    "rotation_noslip": lambda: rotation._scene("sticky", 64),
+}
+#: (case, method): digests as above after VALIDATION_STEPS steps (recorded 2026-12-01 with the build of
+#: f17a8f1, before the scene schema and the restructuring of issue 12).
+VALIDATION_DIGESTS: dict[tuple[str, str], str] = {
+    ("poiseuille", "naive"): "fa03c6b343752aec",
+    ("poiseuille", "augmented"): "5a43226f3443d20d",
+    ("couette", "naive"): "9ad327bcca4d6096",
+    ("couette", "augmented"): "6d2dabc7f8465adf",
+    ("dam_break", "naive"): "74d63de6f6034dc3",
+    ("dam_break", "augmented"): "83dd1af94ea8a1a5",
+    ("incline", "naive"): "e08fd017d4a3abde",
+    ("incline", "augmented"): "cdfe9e3862c99600",
+    ("hydrostatic", "naive"): "5ae639dbfe335d1b",
+    ("hydrostatic", "augmented"): "3b285f33178e6106",
+    ("hydrostatic_grid_density", "naive"): "2e0e330559dcb3f4",
+    ("hydrostatic_grid_density", "augmented"): "e975e4c84b8e0546",
+    ("hydrostatic_density_corrected", "naive"): "059c76eee3cb2789",
+    ("hydrostatic_density_corrected", "augmented"): "f9d497d8f2a2c066",
+    ("rotation_fullslip", "naive"): "b05c831e7922191c",
+    ("rotation_fullslip", "augmented"): "7ac86abc4c99eb2f",
+    ("rotation_noslip", "naive"): "389940774c7129da",
+    ("rotation_noslip", "augmented"): "20bad1ca3787c10c",
+}
+VALIDATION_STEPS = 300
+
 
 def _digest(sim: augmpm.Simulation) -> str:
     state = sim.checkpoint()
@@ -53,3 +93,18 @@ def test_final_state_is_bitwise_unchanged(scene, method):
         sim = augmpm.Simulation(augmpm.load_scene(SCENES / "paper" / f"{scene}.toml"), method, threads=2)
         sim.step(PAPER_STEPS)
     assert _digest(sim) == DIGESTS[(scene, method)], f"{scene}, {method}: the final state changed"
+
+
+def validation_digest(case: str, method: str) -> str:
+    sim = augmpm.Simulation(augmpm.Scene.from_dict(VALIDATION_SCENES[case]()), method, threads=2)
+    sim.step(VALIDATION_STEPS)
+    return _digest(sim)
+
+
+@pytest.mark.parametrize(("case", "method"), sorted(VALIDATION_DIGESTS), ids=lambda v: str(v))
+def test_validation_cases_are_bitwise_unchanged(case, method):
+    assert validation_digest(case, method) == VALIDATION_DIGESTS[(case, method)], f"{case}, {method} changed"
+
+
+def test_every_validation_case_is_guarded():
+    assert set(VALIDATION_DIGESTS) == {(c, m) for c in VALIDATION_SCENES for m in ("naive", "augmented")}
