@@ -50,7 +50,7 @@ fn dam_break(c: &mut Criterion) {
         for (name, method) in [("naive", Method::Naive), ("augmented", Method::Augmented)] {
             for threads in [1, 2] {
                 let mut sim = simulation(&scene, method, threads);
-                group.throughput(Throughput::Elements((sim.particles.len() * steps) as u64));
+                group.throughput(Throughput::Elements((sim.state.particles.len() * steps) as u64));
                 group.bench_function(BenchmarkId::new(name, format!("{threads}t")), |b| {
                     b.iter(|| sim.advance(steps as u64).expect("dam break steps"))
                 });

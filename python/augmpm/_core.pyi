@@ -16,6 +16,9 @@ def scene_schema() -> str:
 def check_scene(scene_json: str) -> None:
     """Checks a resolved scene (JSON) as the engine does before building it; raises SceneError."""
 
+def state_fields() -> list[dict[str, Any]]:
+    """The per-particle arrays of a checkpoint: name, dtype, shape after the particle axis, unit, doc."""
+
 class Error(Exception):
     """Base class of every augmpm error."""
 

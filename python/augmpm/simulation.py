@@ -169,11 +169,9 @@ class Simulation:
         return self._sim.metrics()
 
 
-# Dtypes of the arrays of a checkpoint (see Simulation.checkpoint); the rest are scalars.
-_STATE_DTYPES = {
-    **dict.fromkeys(["x", "v", "c", "f", "jp", "mass", "vol0", "density"], np.float64),
-    **dict.fromkeys(["body", "material", "bins"], np.uint32),
-}
+# Dtypes of the arrays of a checkpoint, from the engine's table of per-particle fields (see
+# Simulation.checkpoint); the rest are scalars.
+_STATE_DTYPES = {f["name"]: np.dtype(f["dtype"]) for f in _core.state_fields()}
 
 THREADS_ENV = "AUGMPM_THREADS"
 MEMORY_ENV = "AUGMPM_MEMORY_LIMIT"

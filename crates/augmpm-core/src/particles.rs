@@ -1,28 +1,225 @@
-//! Particle storage, structure of arrays.
+//! Particle storage, structure of arrays, declared once as a table of fields: the table drives the
+//! storage, the checkpoint's keys and shapes, the restore checks and the memory accounting, for any
+//! dimension D.
 
 use crate::math::{Matrix, Real, Vector};
 
-/// Material points. Every array has one entry per particle.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Particles<const D: usize> {
-    /// Position (m).
-    pub x: Vec<Vector<D>>,
-    /// Velocity (m/s).
-    pub v: Vec<Vector<D>>,
-    /// Affine velocity field, the velocity gradient ∇v (1/s) of APIC/MLS.
-    pub c: Vec<Matrix<D>>,
-    /// Elastic deformation gradient F.
-    pub f: Vec<Matrix<D>>,
-    /// Plastic volume ratio J_p.
-    pub jp: Vec<Real>,
-    /// Mass (kg, or kg/m in 2D).
-    pub mass: Vec<Real>,
-    /// Initial volume (m³, or m² in 2D).
-    pub vol0: Vec<Real>,
-    /// Index of the body the particle was seeded in.
-    pub body: Vec<u32>,
-    /// Index of the particle's material in the model.
-    pub material: Vec<u32>,
+/// What a per-particle field holds for each particle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FieldKind {
+    /// A vector of D reals.
+    Vector,
+    /// A D × D matrix of reals (stored row by row in checkpoints).
+    Matrix,
+    /// One real.
+    Real,
+    /// One unsigned 32-bit index.
+    Index,
+}
+
+impl FieldKind {
+    /// The shape of one particle's value in D dimensions: `[D]`, `[D, D]` or `[]`.
+    pub fn shape(self, d: usize) -> Vec<usize> {
+        match self {
+            FieldKind::Vector => vec![d],
+            FieldKind::Matrix => vec![d, d],
+            FieldKind::Real | FieldKind::Index => vec![],
+        }
+    }
+
+    /// Bytes of one particle's value in D dimensions.
+    pub fn bytes(self, d: usize) -> usize {
+        match self {
+            FieldKind::Index => std::mem::size_of::<u32>(),
+            kind => kind.shape(d).iter().product::<usize>() * std::mem::size_of::<Real>(),
+        }
+    }
+}
+
+/// One per-particle field: its name (the checkpoint's key), what it holds, its unit and doc line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Field {
+    pub name: &'static str,
+    pub kind: FieldKind,
+    /// SI unit, "1" when dimensionless, "" for an index.
+    pub unit: &'static str,
+    pub doc: &'static str,
+}
+
+/// A field's values, read-only (the variant is the field's [`FieldKind`]).
+#[derive(Clone, Copy, Debug)]
+pub enum Column<'a, const D: usize> {
+    Vector(&'a Vec<Vector<D>>),
+    Matrix(&'a Vec<Matrix<D>>),
+    Real(&'a Vec<Real>),
+    Index(&'a Vec<u32>),
+}
+
+/// A field's values, to replace.
+#[derive(Debug)]
+pub enum ColumnMut<'a, const D: usize> {
+    Vector(&'a mut Vec<Vector<D>>),
+    Matrix(&'a mut Vec<Matrix<D>>),
+    Real(&'a mut Vec<Real>),
+    Index(&'a mut Vec<u32>),
+}
+
+impl<'a, const D: usize> Column<'a, D> {
+    pub fn len(&self) -> usize {
+        match self {
+            Column::Vector(a) => a.len(),
+            Column::Matrix(a) => a.len(),
+            Column::Real(a) => a.len(),
+            Column::Index(a) => a.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Heap bytes of the array (its capacity).
+    pub fn heap_bytes(&self) -> usize {
+        use crate::math::heap_bytes as b;
+        match self {
+            Column::Vector(a) => b(a),
+            Column::Matrix(a) => b(a),
+            Column::Real(a) => b(a),
+            Column::Index(a) => b(a),
+        }
+    }
+
+    /// Index of the first particle whose value is not finite (indices always are).
+    pub fn first_non_finite(&self) -> Option<usize> {
+        match self {
+            Column::Vector(a) => a.iter().position(|v| !v.iter().all(|x| x.is_finite())),
+            Column::Matrix(a) => a.iter().position(|m| !m.iter().all(|x| x.is_finite())),
+            Column::Real(a) => a.iter().position(|x| !x.is_finite()),
+            Column::Index(_) => None,
+        }
+    }
+
+    /// The reals of the column, widened to f64, particle by particle (matrices row by row);
+    /// `None` for an index column.
+    #[allow(clippy::useless_conversion)] // `Real` is f64 here, f32 in augmpm-core-f32
+    pub fn to_f64(&self) -> Option<Vec<f64>> {
+        let w = |x: Real| f64::from(x);
+        Some(match self {
+            Column::Vector(a) => a.iter().flat_map(|v| v.iter().map(|&x| w(x)).collect::<Vec<_>>()).collect(),
+            Column::Matrix(a) => {
+                a.iter().flat_map(|m| (0..D).flat_map(move |i| (0..D).map(move |j| w(m[(i, j)])))).collect()
+            }
+            Column::Real(a) => a.iter().map(|&x| w(x)).collect(),
+            Column::Index(_) => return None,
+        })
+    }
+}
+
+impl<const D: usize> ColumnMut<'_, D> {
+    /// Replaces the values of a real column with `data` (particle by particle, matrices row by row,
+    /// as [`Column::to_f64`] gives them), rounded to `Real`.
+    pub fn set_f64(&mut self, data: &[f64]) {
+        let r = |x: f64| x as Real;
+        match self {
+            ColumnMut::Vector(a) => {
+                **a = data.chunks_exact(D).map(|c| Vector::<D>::from_fn(|i, _| r(c[i]))).collect();
+            }
+            ColumnMut::Matrix(a) => {
+                **a = data.chunks_exact(D * D).map(|c| Matrix::<D>::from_fn(|i, j| r(c[i * D + j]))).collect();
+            }
+            ColumnMut::Real(a) => **a = data.iter().map(|&x| r(x)).collect(),
+            ColumnMut::Index(_) => panic!("set_f64 on an index column"),
+        }
+    }
+
+    /// Replaces the values of an index column.
+    pub fn set_indices(&mut self, data: &[u32]) {
+        match self {
+            ColumnMut::Index(a) => **a = data.to_vec(),
+            _ => panic!("set_indices on a real column"),
+        }
+    }
+}
+
+/// Declares a structure of per-particle arrays once: the struct (one `Vec` per field), its field
+/// table `FIELDS` and its `columns`/`columns_mut` views in the same order.
+#[macro_export]
+macro_rules! per_particle {
+    (
+        $(#[$meta:meta])*
+        pub struct $name:ident {
+            $( $(#[doc = $doc:literal])* $field:ident : $kind:ident [$unit:literal], )*
+        }
+    ) => {
+        $(#[$meta])*
+        pub struct $name<const D: usize> {
+            $( $(#[doc = $doc])* pub $field: Vec<$crate::per_particle!(@type $kind)>, )*
+        }
+
+        impl<const D: usize> $name<D> {
+            /// The fields, in declaration order.
+            pub const FIELDS: &'static [$crate::particles::Field] = &[
+                $( $crate::particles::Field {
+                    name: stringify!($field),
+                    kind: $crate::particles::FieldKind::$kind,
+                    unit: $unit,
+                    doc: concat!($($doc),*),
+                }, )*
+            ];
+
+            /// Each field's values, in the order of [`Self::FIELDS`].
+            pub fn columns(&self) -> Vec<$crate::particles::Column<'_, D>> {
+                vec![$( $crate::particles::Column::$kind(&self.$field), )*]
+            }
+
+            /// Each field's values, to replace, in the order of [`Self::FIELDS`].
+            pub fn columns_mut(&mut self) -> Vec<$crate::particles::ColumnMut<'_, D>> {
+                vec![$( $crate::particles::ColumnMut::$kind(&mut self.$field), )*]
+            }
+        }
+    };
+    (@type Vector) => { $crate::math::Vector<D> };
+    (@type Matrix) => { $crate::math::Matrix<D> };
+    (@type Real) => { $crate::math::Real };
+    (@type Index) => { u32 };
+}
+
+per_particle! {
+    /// Material points. Every array has one entry per particle.
+    #[derive(Clone, Debug, Default, PartialEq)]
+    pub struct Particles {
+        /// Position.
+        x: Vector["m"],
+        /// Velocity.
+        v: Vector["m/s"],
+        /// Affine velocity field, the velocity gradient ∇v of APIC/MLS.
+        c: Matrix["1/s"],
+        /// Elastic deformation gradient F.
+        f: Matrix["1"],
+        /// Plastic volume ratio J_p (fluids: the volume ratio J).
+        jp: Real["1"],
+        /// Mass (per unit length in 2D).
+        mass: Real["kg"],
+        /// Initial volume (an area in 2D).
+        vol0: Real["m³"],
+        /// Index of the body the particle was seeded in.
+        body: Index[""],
+        /// Index of the particle's material in the model.
+        material: Index[""],
+    }
+}
+
+/// Heap bytes of the arrays behind `columns`.
+pub fn heap_bytes<const D: usize>(columns: &[Column<'_, D>]) -> usize {
+    columns.iter().map(Column::heap_bytes).sum()
+}
+
+/// The first column whose length is not `n`, as a message naming its field.
+pub fn check_lengths<const D: usize>(columns: &[Column<'_, D>], fields: &[Field], n: usize) -> Result<(), String> {
+    match columns.iter().zip(fields).find(|(c, _)| c.len() != n) {
+        Some((c, f)) => Err(format!("{} has {} entries for {n} particles", f.name, c.len())),
+        None => Ok(()),
+    }
 }
 
 impl<const D: usize> Particles<D> {
@@ -49,16 +246,12 @@ impl<const D: usize> Particles<D> {
 
     /// Heap bytes of the particle arrays.
     pub fn heap_bytes(&self) -> usize {
-        use crate::math::heap_bytes as b;
-        b(&self.x)
-            + b(&self.v)
-            + b(&self.c)
-            + b(&self.f)
-            + b(&self.jp)
-            + b(&self.mass)
-            + b(&self.vol0)
-            + b(&self.body)
-            + b(&self.material)
+        heap_bytes(&self.columns())
+    }
+
+    /// Bytes per particle of the arrays, in D dimensions.
+    pub fn bytes_per_particle() -> usize {
+        Self::FIELDS.iter().map(|f| f.kind.bytes(D)).sum()
     }
 
     /// Total kinetic energy ½ Σ m v² (J, or J/m in 2D), summed in particle order in f64 as
@@ -79,4 +272,44 @@ impl<const D: usize> Particles<D> {
 #[allow(clippy::useless_conversion)] // `Real` is f64 here, f32 in augmpm-core-f32
 pub fn energy_root<const D: usize>(m: Real, v: &Vector<D>) -> f64 {
     f64::from(m).sqrt() * v.iter().map(|&a| f64::from(a).powi(2)).sum::<f64>().sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The table lists every array of the struct, and `push` grows each by one particle.
+    #[test]
+    fn the_table_covers_every_array_and_push_fills_them() {
+        let mut p = Particles::<3>::default();
+        p.push(Vector::<3>::zeros(), Vector::<3>::zeros(), 1.0, 1.0, 0, 0);
+        p.push(Vector::<3>::zeros(), Vector::<3>::zeros(), 1.0, 1.0, 0, 0);
+        assert_eq!(p.columns().len(), Particles::<3>::FIELDS.len());
+        check_lengths(&p.columns(), Particles::<3>::FIELDS, 2).unwrap();
+        let names: Vec<&str> = Particles::<3>::FIELDS.iter().map(|f| f.name).collect();
+        assert_eq!(names, ["x", "v", "c", "f", "jp", "mass", "vol0", "body", "material"]);
+        // 3D: 3 + 3 + 9 + 9 + 3 reals and 2 indices per particle.
+        assert_eq!(Particles::<3>::bytes_per_particle(), 27 * std::mem::size_of::<Real>() + 8);
+        assert!(p.heap_bytes() >= 2 * Particles::<3>::bytes_per_particle());
+    }
+
+    /// A column written from its f64 form reads back the same (matrices row by row).
+    #[test]
+    fn columns_round_trip_through_f64() {
+        let mut p = Particles::<2>::default();
+        p.push(Vector::<2>::new(0.25, 0.5), Vector::<2>::new(1.0, -2.0), 3.0, 0.5, 1, 0);
+        p.c[0] = Matrix::<2>::new(1.0, 2.0, 3.0, 4.0);
+        assert_eq!(Column::Matrix(&p.c).to_f64().unwrap(), [1.0, 2.0, 3.0, 4.0]);
+        let mut q = Particles::<2>::default();
+        for (from, mut to) in p.columns().iter().zip(q.columns_mut()) {
+            match from.to_f64() {
+                Some(data) => to.set_f64(&data),
+                None => match from {
+                    Column::Index(a) => to.set_indices(a.as_slice()),
+                    _ => unreachable!(),
+                },
+            }
+        }
+        assert_eq!(p, q);
+    }
 }

@@ -306,9 +306,12 @@ const GRID_BYTES_PER_NODE: u64 = 7 * std::mem::size_of::<Real>() as u64;
 /// Largest number of jittered candidate points per body: 20 M particles need about 4 GB.
 const MAX_SEED_CANDIDATES: u64 = 20_000_000;
 
-/// Bytes per particle of a running simulation: the state (15 reals, body and material), the
-/// per-step scratch (density, binning, wall table) and the growth of the arrays while seeding.
-const PARTICLE_BYTES: u64 = 20 * std::mem::size_of::<Real>() as u64 + 16;
+/// Bytes per particle of a running simulation: its state (the per-particle fields of
+/// [`crate::State::fields`]), the schedule's order (one index) and, while seeding, the candidate
+/// positions and the growth of the arrays (four reals).
+fn particle_bytes() -> u64 {
+    (crate::State::<2>::bytes_per_particle() + std::mem::size_of::<u32>() + 4 * std::mem::size_of::<Real>()) as u64
+}
 
 /// What a scene will need in memory, estimated without allocating it.
 #[derive(Clone, Debug, PartialEq)]
@@ -625,7 +628,7 @@ impl Scene {
             }
         }
         // In floating point, saturating: a tiny seeding spacing must not wrap the byte count.
-        let particle_bytes = particles * PARTICLE_BYTES as Real;
+        let particle_bytes = particles * particle_bytes() as Real;
         let grid_bytes = nodes as Real * GRID_BYTES_PER_NODE as Real;
         let key = match largest.1 {
             Some(b) if particle_bytes > grid_bytes => format!("bodies[{b}].seeding"),

@@ -47,9 +47,24 @@ impl<const D: usize> Reach<D> {
         for k in 0..D {
             assert!(
                 self.lo[k] <= base[k] && base[k] <= self.hi[k],
-                "particle moved out of its block since it was binned; call Schedule::invalidate after moving particles"
+                "particle moved out of its block since it was binned; after moving particles, set the state's drift to infinity (or restore a state)"
             );
         }
+    }
+}
+
+/// The block each particle was binned in, and how far (cells, per axis) the particles may have moved
+/// since: part of a simulation's state, as it fixes the order of the grid sums.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Binning {
+    pub bins: Vec<u32>,
+    /// Infinite before the first binning, or when the binning is not to be trusted: bin again.
+    pub drift: Real,
+}
+
+impl Default for Binning {
+    fn default() -> Self {
+        Self { bins: Vec::new(), drift: Real::INFINITY }
     }
 }
 
@@ -58,8 +73,6 @@ impl<const D: usize> Reach<D> {
 pub struct Schedule<const D: usize> {
     /// Blocks along each axis.
     block_dims: [usize; D],
-    /// Per particle: its block (scratch of the sort).
-    key: Vec<u32>,
     /// Particle indices sorted by block, in index order within a block.
     order: Vec<u32>,
     /// `order[start[b]..start[b + 1]]` are the particles of block `b`.
@@ -74,9 +87,6 @@ pub struct Schedule<const D: usize> {
     stale: Vec<u32>,
     mark: Vec<bool>,
     parallel: bool,
-    /// Largest distance (in cells, per axis) a particle may have moved since the last binning;
-    /// infinite before the first.
-    drift: Real,
     /// Whether the last [`Schedule::prepare`] binned the particles again.
     rebinned: bool,
 }
@@ -87,7 +97,6 @@ impl<const D: usize> Schedule<D> {
         let n: usize = block_dims.iter().product();
         Self {
             block_dims,
-            key: Vec::new(),
             order: Vec::new(),
             start: vec![0; n + 1],
             hist: vec![0; CHUNKS * n],
@@ -97,7 +106,6 @@ impl<const D: usize> Schedule<D> {
             stale: Vec::with_capacity(n),
             mark: vec![false; n],
             parallel: false,
-            drift: Real::INFINITY,
             rebinned: false,
         }
     }
@@ -106,9 +114,9 @@ impl<const D: usize> Schedule<D> {
         self.mark.len()
     }
 
-    /// Heap bytes of the per-particle arrays (`key`, `order`).
+    /// Heap bytes of the per-particle array (`order`; the bins are part of the state).
     pub fn particle_bytes(&self) -> usize {
-        crate::math::heap_bytes(&self.key) + crate::math::heap_bytes(&self.order)
+        crate::math::heap_bytes(&self.order)
     }
 
     /// Heap bytes of the per-block arrays.
@@ -141,61 +149,47 @@ impl<const D: usize> Schedule<D> {
         }
     }
 
-    /// Records that every particle moved at most `cells` cell widths along each axis.
-    pub fn moved(&mut self, cells: Real) {
-        self.drift += cells;
-    }
-
-    /// Forgets the binning: the next [`Schedule::prepare`] bins again (e.g. after a failed step).
-    pub fn invalidate(&mut self) {
-        self.drift = Real::INFINITY;
-    }
-
-    /// Makes the schedule valid for particles at `x`: bins them again if they may have moved
-    /// more than [`SLACK`] cells since they were binned, or their number changed.
-    pub fn prepare(&mut self, layout: &GridLayout<D>, x: &[Vector<D>]) -> Result<(), OutOfGrid> {
+    /// Makes the schedule valid for particles at `x` binned as `binning` says (part of the
+    /// simulation's state): bins them again if they may have moved more than [`SLACK`] cells since
+    /// (its drift; infinite before the first binning), or their number changed.
+    pub fn prepare(&mut self, layout: &GridLayout<D>, x: &[Vector<D>], binning: &mut Binning) -> Result<(), OutOfGrid> {
         // A NaN drift (never produced: G2P stops on non-finite velocities) would also rebin.
-        self.rebinned = self.drift.is_nan() || self.drift > SLACK || x.len() != self.order.len();
+        self.rebinned = binning.drift.is_nan() || binning.drift > SLACK || x.len() != self.order.len();
         if self.rebinned {
-            self.sort(layout, x)?;
+            self.sort(layout, x, binning)?;
         }
         Ok(())
     }
 
-    /// Bins the particles at `x` by block. Fails with the lowest-numbered particle whose
-    /// stencil is not inside the grid. Allocates only when the particle count grows.
-    pub fn sort(&mut self, layout: &GridLayout<D>, x: &[Vector<D>]) -> Result<(), OutOfGrid> {
+    /// Bins the particles at `x` by block into `binning`, its drift 0. Fails with the
+    /// lowest-numbered particle whose stencil is not inside the grid (the drift is then infinite).
+    /// Allocates only when the particle count grows.
+    pub fn sort(&mut self, layout: &GridLayout<D>, x: &[Vector<D>], binning: &mut Binning) -> Result<(), OutOfGrid> {
         let n = x.len();
         assert!(n < u32::MAX as usize, "particle indices are stored as u32");
+        let Binning { bins, drift } = binning;
+        *drift = Real::INFINITY;
         self.parallel = n >= PARALLEL_MIN;
-        self.key.resize(n, 0);
+        bins.resize(n, 0);
         let inv_h = 1.0 / layout.h;
         let block_dims = self.block_dims;
         let key_of = |(key, xp): (&mut u32, &Vector<D>)| *key = block_of(layout, &block_dims, xp, inv_h);
         if self.parallel {
-            self.key.par_iter_mut().zip(x.par_iter()).with_min_len(MIN_TASK).for_each(key_of);
+            bins.par_iter_mut().zip(x.par_iter()).with_min_len(MIN_TASK).for_each(key_of);
         } else {
-            self.key.iter_mut().zip(x).for_each(key_of);
+            bins.iter_mut().zip(x).for_each(key_of);
         }
-        self.sort_keys()
+        self.sort_keys(bins)?;
+        *drift = 0.0;
+        Ok(())
     }
 
-    /// The block each particle was binned in, and how far (cells) the particles may have moved
-    /// since: with the positions, all a checkpoint needs to restore the schedule exactly.
-    pub fn binning(&self) -> (&[u32], Real) {
-        (&self.key, self.drift)
-    }
-
-    /// Restores a binning saved by [`Schedule::binning`] for particles now at `x`, so that the
-    /// steps that follow sum in the same order as they would have without the interruption.
-    /// Fails, changing nothing, unless every particle is within reach of its block.
-    pub fn restore(
-        &mut self,
-        layout: &GridLayout<D>,
-        x: &[Vector<D>],
-        bins: &[u32],
-        drift: Real,
-    ) -> Result<(), String> {
+    /// Restores the schedule of a saved binning for particles now at `x`, so that
+    /// the steps that follow sum in the same order as they would have without the interruption.
+    /// Fails, changing nothing, unless every particle is within reach of its block. A drift
+    /// beyond [`SLACK`] (not binned, or due) leaves it to the next [`Schedule::prepare`] to bin.
+    pub fn restore(&mut self, layout: &GridLayout<D>, x: &[Vector<D>], binning: &Binning) -> Result<(), String> {
+        let (bins, drift) = (&binning.bins, binning.drift);
         if bins.len() != x.len() {
             return Err(format!("{} bins for {} particles", bins.len(), x.len()));
         }
@@ -204,7 +198,6 @@ impl<const D: usize> Schedule<D> {
         }
         if drift > SLACK {
             // Not binned, binning forgotten, or due: the next step bins afresh, as the saved run's did.
-            self.invalidate();
             return Ok(());
         }
         // Each particle must lie within `drift` cells of its block (its binning plus the motion
@@ -229,19 +222,15 @@ impl<const D: usize> Schedule<D> {
             }
         }
         self.parallel = x.len() >= PARALLEL_MIN;
-        self.key.clear();
-        self.key.extend_from_slice(bins);
-        self.sort_keys().map_err(|OutOfGrid(p)| format!("particle {p} is outside the grid"))?;
-        self.drift = drift;
+        self.sort_keys(bins).map_err(|OutOfGrid(p)| format!("particle {p} is outside the grid"))?;
         Ok(())
     }
 
     /// Counting sort of the particles by their keys, then the coloured block lists and the
     /// active node blocks.
-    fn sort_keys(&mut self) -> Result<(), OutOfGrid> {
-        self.drift = Real::INFINITY;
+    fn sort_keys(&mut self, key: &[u32]) -> Result<(), OutOfGrid> {
         self.rebinned = true;
-        let n = self.key.len();
+        let n = key.len();
         self.order.resize(n, 0);
         let block_dims = self.block_dims;
 
@@ -255,7 +244,7 @@ impl<const D: usize> Schedule<D> {
         hist.fill(0);
         let outside = hist
             .par_chunks_mut(nb)
-            .zip(self.key.par_chunks(chunk))
+            .zip(key.par_chunks(chunk))
             .enumerate()
             .with_min_len(min_chunks)
             .filter_map(|(c, (hist, keys))| {
@@ -283,7 +272,7 @@ impl<const D: usize> Schedule<D> {
         }
         self.start[nb] = running;
         let order = Disjoint::new(&mut self.order);
-        hist.par_chunks_mut(nb).zip(self.key.par_chunks(chunk)).enumerate().with_min_len(min_chunks).for_each(
+        hist.par_chunks_mut(nb).zip(key.par_chunks(chunk)).enumerate().with_min_len(min_chunks).for_each(
             |(c, (offset, keys))| {
                 for (j, &k) in keys.iter().enumerate() {
                     let slot = offset[k as usize] as usize;
@@ -340,7 +329,6 @@ impl<const D: usize> Schedule<D> {
             }
             next(&mut c);
         }
-        self.drift = 0.0;
         std::mem::swap(&mut self.active, &mut self.stale);
         self.active.clear();
         for (b, m) in self.mark.iter_mut().enumerate() {
@@ -475,7 +463,7 @@ mod tests {
         let layout = GridLayout::<2>::new(1.0 / 40.0, [40, 40]);
         let x = scattered(5000, 3);
         let mut s = Schedule::new(&layout);
-        s.sort(&layout, &x).unwrap();
+        s.sort(&layout, &x, &mut Binning::default()).unwrap();
         let mut seen = vec![false; x.len()];
         let mut visited = 0;
         s.for_each_block(|_, ps| {
@@ -533,6 +521,6 @@ mod tests {
         let mut x = scattered(9000, 5);
         x[7000] = Vector2::new(5.0, 0.5);
         x[4000] = Vector2::new(0.5, -1.0);
-        assert_eq!(Schedule::new(&layout).sort(&layout, &x), Err(OutOfGrid(4000)));
+        assert_eq!(Schedule::new(&layout).sort(&layout, &x, &mut Binning::default()), Err(OutOfGrid(4000)));
     }
 }

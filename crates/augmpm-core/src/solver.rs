@@ -9,8 +9,8 @@ use crate::grid::{GridLayout, GridState};
 use crate::material::{ConstitutiveModel, Material};
 use crate::math::{Dim, DimOps, Real, Vector};
 use crate::parallel::Disjoint;
-use crate::particles::Particles;
-use crate::schedule::Schedule;
+use crate::particles::{Column, ColumnMut, Field, FieldKind, Particles};
+use crate::schedule::{Binning, Schedule};
 use crate::transfer::{self, GridDensity, Transfer};
 use std::time::Instant;
 
@@ -119,6 +119,8 @@ fn likely_cause(dt: Real, stable_dt: Real) -> String {
 
 /// Everything that evolves during a run: with the scene it was built from, a [`State`] continues
 /// the run bitwise identically (the binning is part of it: it fixes the order of the grid sums).
+/// A checkpoint is a [`State`]: its per-particle arrays are listed by [`State::fields`] and
+/// [`State::columns`], its numbers by [`State::scalars`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct State<const D: usize> {
     pub step: u64,
@@ -132,10 +134,101 @@ pub struct State<const D: usize> {
     pub particles: Particles<D>,
     /// Density of each particle in the last step (ρ0/J̄ or the grid's; see [`Simulation::grid_density`]).
     pub density: Vec<Real>,
-    /// Block each particle was binned in ([`Schedule::binning`]).
-    pub bins: Vec<u32>,
-    /// Cells the particles may have moved since they were binned (infinite: bin again).
-    pub drift: Real,
+    /// The block each particle was binned in, and how far the particles may have moved since.
+    pub binning: Binning,
+}
+
+/// The per-particle arrays of a [`State`] beyond its [`Particles`].
+const STEP_FIELDS: [Field; 2] = [
+    Field {
+        name: "density",
+        kind: FieldKind::Real,
+        unit: "kg/m³",
+        doc: "Density in the last step, as the particle's material saw it (per unit area in 2D).",
+    },
+    Field { name: "bins", kind: FieldKind::Index, unit: "", doc: "Block the particle was binned in." },
+];
+
+/// A number of a [`State`], to read or to replace.
+#[derive(Debug)]
+pub enum Scalar<'a> {
+    Count(&'a mut u64),
+    Real(&'a mut Real),
+}
+
+impl<const D: usize> State<D> {
+    /// The state of `particles` at rest before the first step: time 0, not binned.
+    pub fn new(particles: Particles<D>) -> Self {
+        let n = particles.len();
+        Self {
+            step: 0,
+            time: 0.0,
+            ill_conditioned: 0,
+            low_mass_nodes: 0,
+            held_at_wall: 0,
+            max_cfl: 0.0,
+            particles,
+            density: vec![0.0; n],
+            binning: Binning { bins: vec![0; n], drift: Real::INFINITY },
+        }
+    }
+
+    /// The per-particle fields: the particles', then the density and the binning.
+    pub fn fields() -> impl Iterator<Item = &'static Field> {
+        Particles::<D>::FIELDS.iter().chain(STEP_FIELDS.iter())
+    }
+
+    /// Each per-particle array, in the order of [`State::fields`].
+    pub fn columns(&self) -> Vec<Column<'_, D>> {
+        let mut columns = self.particles.columns();
+        columns.extend([Column::Real(&self.density), Column::Index(&self.binning.bins)]);
+        columns
+    }
+
+    /// Each per-particle array, to replace, in the order of [`State::fields`].
+    pub fn columns_mut(&mut self) -> Vec<ColumnMut<'_, D>> {
+        let mut columns = self.particles.columns_mut();
+        columns.extend([ColumnMut::Real(&mut self.density), ColumnMut::Index(&mut self.binning.bins)]);
+        columns
+    }
+
+    /// The numbers of the state by name: the clock, the counters, the last move and the drift.
+    pub fn scalars(&mut self) -> [(&'static str, Scalar<'_>); 7] {
+        [
+            ("step", Scalar::Count(&mut self.step)),
+            ("time", Scalar::Real(&mut self.time)),
+            ("ill_conditioned", Scalar::Count(&mut self.ill_conditioned)),
+            ("low_mass_nodes", Scalar::Count(&mut self.low_mass_nodes)),
+            ("held_at_wall", Scalar::Count(&mut self.held_at_wall)),
+            ("max_cfl", Scalar::Real(&mut self.max_cfl)),
+            ("drift", Scalar::Real(&mut self.binning.drift)),
+        ]
+    }
+
+    /// Bytes per particle of the state in D dimensions.
+    pub fn bytes_per_particle() -> usize {
+        Self::fields().map(|f| f.kind.bytes(D)).sum()
+    }
+
+    /// Heap bytes of the state's arrays.
+    pub fn heap_bytes(&self) -> usize {
+        crate::particles::heap_bytes(&self.columns())
+    }
+
+    /// Checks that every array has one entry per particle and every real is finite; names the field.
+    fn check(&self) -> Result<(), String> {
+        let n = self.particles.len();
+        let fields: Vec<Field> = Self::fields().copied().collect();
+        let columns = self.columns();
+        crate::particles::check_lengths(&columns, &fields, n)?;
+        if let Some((f, p)) = fields.iter().zip(&columns).find_map(|(f, c)| c.first_non_finite().map(|p| (f, p))) {
+            return Err(format!("{} of particle {p} is not finite", f.name));
+        }
+        if !(self.time.is_finite() && self.max_cfl.is_finite()) {
+            return Err("the state holds non-finite values".to_string());
+        }
+        Ok(())
+    }
 }
 
 /// Scratch arrays of a step, allocated once (they grow only with the particle count or the
@@ -149,7 +242,6 @@ struct Scratch<const D: usize> {
     /// material whether its particles take part.
     volume_ratio: Vec<(Real, Real)>,
     smooths: Vec<bool>,
-    density: Vec<Real>,
     /// Particles whose MLS system sees a wall, with their inverses (augmented grid only).
     walls: WallParticles<D>,
 }
@@ -204,25 +296,17 @@ pub struct Metrics {
     pub max_cfl: Real,
 }
 
-/// A running simulation: the model, the particles and the clock.
+/// A running simulation: the model (fixed during the run), the state (everything that evolves) and
+/// the scratch of a step.
 pub struct Simulation<const D: usize> {
     pub model: Model<D>,
-    pub particles: Particles<D>,
-    /// Steps taken.
-    pub step: u64,
-    /// Time (s).
-    pub time: Real,
-    ill_conditioned: u64,
-    low_mass_nodes: u64,
-    held_at_wall: u64,
-    times: StageTimes,
+    pub state: State<D>,
     scratch: Scratch<D>,
+    times: StageTimes,
     /// The threads steps run on; `None` runs them in the caller's rayon context.
     pool: Option<rayon::ThreadPool>,
     /// The error of the step that failed; later steps return it until a [`State`] is restored.
     failed: Option<StepError>,
-    /// Largest distance a particle moved in the last step (cell widths).
-    last_move: Real,
 }
 
 impl<const D: usize> Simulation<D>
@@ -230,7 +314,6 @@ where
     Dim<D>: DimOps<D>,
 {
     pub fn new(model: Model<D>, particles: Particles<D>) -> Self {
-        let n = particles.len();
         let density = model.needs_grid_density();
         let scratch = Scratch {
             schedule: Schedule::new(&model.layout),
@@ -242,23 +325,24 @@ where
                 Vec::new()
             },
             smooths: model.materials.iter().map(ConstitutiveModel::<D>::smooths_volume_ratio).collect(),
-            density: vec![0.0; n],
             walls: WallParticles::default(),
         };
-        Self {
-            model,
-            particles,
-            step: 0,
-            time: 0.0,
-            ill_conditioned: 0,
-            low_mass_nodes: 0,
-            held_at_wall: 0,
-            times: StageTimes::default(),
-            scratch,
-            pool: None,
-            failed: None,
-            last_move: 0.0,
-        }
+        Self { model, state: State::new(particles), scratch, times: StageTimes::default(), pool: None, failed: None }
+    }
+
+    /// The particles.
+    pub fn particles(&self) -> &Particles<D> {
+        &self.state.particles
+    }
+
+    /// Steps taken.
+    pub fn steps_done(&self) -> u64 {
+        self.state.step
+    }
+
+    /// Time (s).
+    pub fn time(&self) -> Real {
+        self.state.time
     }
 
     /// Runs the steps on `threads` threads of the simulation's own pool (0: one per core), with
@@ -288,8 +372,8 @@ where
             Boundary::Augmented(g) => g.heap_bytes(),
         };
         MemoryUse {
-            particles: self.particles.heap_bytes(),
-            particle_scratch: b(&s.density) + s.schedule.particle_bytes() + s.walls.heap_bytes(),
+            particles: self.state.heap_bytes(),
+            particle_scratch: s.schedule.particle_bytes() + s.walls.heap_bytes(),
             grid: s.grid.heap_bytes()
                 + b(&s.density_mass)
                 + b(&s.volume_ratio)
@@ -337,48 +421,15 @@ where
 
     /// A copy of everything that evolves during the run (see [`State`]).
     pub fn state(&self) -> State<D> {
-        let (bins, drift) = self.scratch.schedule.binning();
-        let n = self.particles.len();
-        // Before the first step (or after a failure) there is no binning to keep: the next step bins.
-        let (bins, drift) =
-            if bins.len() == n && drift.is_finite() { (bins.to_vec(), drift) } else { (vec![0; n], Real::INFINITY) };
-        State {
-            step: self.step,
-            time: self.time,
-            ill_conditioned: self.ill_conditioned,
-            low_mass_nodes: self.low_mass_nodes,
-            held_at_wall: self.held_at_wall,
-            max_cfl: self.last_move,
-            particles: self.particles.clone(),
-            density: self.scratch.density.clone(),
-            bins,
-            drift,
-        }
+        self.state.clone()
     }
 
     /// Continues from `state`, taken from a simulation of the same scene and method: the steps
     /// that follow are bitwise identical to those the saved simulation would have taken. Fails,
     /// changing nothing, if the state does not fit this model.
     pub fn restore(&mut self, state: State<D>) -> Result<(), String> {
+        state.check()?;
         let p = &state.particles;
-        let n = p.x.len();
-        let lengths = [
-            ("v", p.v.len()),
-            ("c", p.c.len()),
-            ("f", p.f.len()),
-            ("jp", p.jp.len()),
-            ("mass", p.mass.len()),
-            ("vol0", p.vol0.len()),
-            ("body", p.body.len()),
-            ("material", p.material.len()),
-            ("bins", state.bins.len()),
-        ];
-        if let Some((name, len)) = lengths.iter().find(|(_, len)| *len != n) {
-            return Err(format!("{name} has {len} entries for {n} particles"));
-        }
-        if !(state.density.is_empty() || state.density.len() == n) {
-            return Err(format!("density has {} entries for {n} particles", state.density.len()));
-        }
         // One material per body (see `Scene::build`).
         let bodies = self.model.materials.len();
         if let Some(i) = p.material.iter().position(|&m| m as usize >= bodies) {
@@ -387,38 +438,13 @@ where
         if let Some(i) = p.body.iter().position(|&b| b as usize >= bodies) {
             return Err(format!("particle {i}: body {} of {bodies}", p.body[i]));
         }
-        let finite = |a: &[Real]| a.iter().all(|v| v.is_finite());
-        let vectors_finite = |a: &[Vector<D>]| a.iter().all(|v| v.iter().all(|x| x.is_finite()));
-        let matrices_finite = |a: &[crate::math::Matrix<D>]| a.iter().all(|m| m.iter().all(|x| x.is_finite()));
-        if !(vectors_finite(&p.x)
-            && vectors_finite(&p.v)
-            && matrices_finite(&p.c)
-            && matrices_finite(&p.f)
-            && finite(&p.jp)
-            && finite(&p.mass)
-            && finite(&p.vol0)
-            && finite(&state.density)
-            && state.time.is_finite()
-            && state.max_cfl.is_finite())
-        {
-            return Err("the state holds non-finite values".to_string());
-        }
         let layout = &self.model.layout;
-        let run = |s: &mut Schedule<D>| s.restore(layout, &p.x, &state.bins, state.drift);
+        let run = |s: &mut Schedule<D>| s.restore(layout, &p.x, &state.binning);
         match &self.pool {
             Some(pool) => pool.install(|| run(&mut self.scratch.schedule)),
             None => run(&mut self.scratch.schedule),
         }?;
-        let State {
-            step, time, ill_conditioned, low_mass_nodes, held_at_wall, max_cfl, particles, mut density, ..
-        } = state;
-        density.resize(n, 0.0);
-        (self.step, self.time) = (step, time);
-        (self.ill_conditioned, self.low_mass_nodes, self.held_at_wall) =
-            (ill_conditioned, low_mass_nodes, held_at_wall);
-        self.last_move = max_cfl;
-        self.particles = particles;
-        self.scratch.density = density;
+        self.state = state;
         self.failed = None;
         // The grid is cleared only where the binning says particles were: start from a clean one.
         let grid = &mut self.scratch.grid;
@@ -431,8 +457,9 @@ where
     }
 
     fn step_here(&mut self) -> Result<(), StepError> {
-        let step = self.step + 1;
-        let Self { model, particles, scratch, times, .. } = self;
+        let step = self.state.step + 1;
+        let Self { model, state, scratch, times, .. } = self;
+        let State { particles, density, binning, .. } = state;
         // Only a failing step pays for the stable-dt bound the message quotes.
         let cause = || likely_cause(model.dt, model.stable_dt());
         let left = |OutOfGrid(particle)| StepError::LeftGrid { step, particle, cause: cause() };
@@ -445,9 +472,8 @@ where
             clock = now;
         };
 
-        let Scratch { schedule, grid, density_mass, volume_ratio, smooths, density, walls } = scratch;
-        schedule.prepare(layout, &particles.x).map_err(left)?;
-        density.resize(particles.len(), 0.0);
+        let Scratch { schedule, grid, density_mass, volume_ratio, smooths, walls } = scratch;
+        schedule.prepare(layout, &particles.x, binning).map_err(left)?;
         let nodes = layout.num_nodes();
         {
             let (mass, spline) =
@@ -493,7 +519,7 @@ where
             Boundary::Naive(_) => None,
             Boundary::Augmented(g) => {
                 // eq. (5), once per particle near a wall and step, reused by P2G, the force and G2P.
-                self.ill_conditioned += walls.update::<Dim<D>>(g, layout, &particles.x).map_err(left)?;
+                state.ill_conditioned += walls.update::<Dim<D>>(g, layout, &particles.x).map_err(left)?;
                 Some((g, &*walls))
             }
         };
@@ -503,7 +529,7 @@ where
         transfer::p2g(&t, &model.materials, particles, grid_density, density, dt, grid);
         lap(&mut times.p2g);
 
-        self.low_mass_nodes += transfer::grid_velocity(&t, grid, &model.gravity, dt) as u64;
+        state.low_mass_nodes += transfer::grid_velocity(&t, grid, &model.gravity, dt) as u64;
         match &model.boundary {
             Boundary::Naive(w) => w.apply(&grid.mass, &mut grid.momentum),
             Boundary::Augmented(g) => g.apply(&grid.mass, &mut grid.momentum),
@@ -515,12 +541,12 @@ where
         let outcome =
             transfer::g2p(&t, model.region.as_ref(), &model.materials, &grid.momentum, smoothed, particles, dt);
         let cells = outcome.max_move / layout.h;
-        schedule.moved(cells);
+        binning.drift += cells;
         lap(&mut times.g2p);
-        self.held_at_wall += outcome.held_at_wall as u64;
-        self.step = step;
-        self.time += dt;
-        self.last_move = cells;
+        state.held_at_wall += outcome.held_at_wall as u64;
+        state.step = step;
+        state.time += dt;
+        state.max_cfl = cells;
         let error = match (outcome.non_finite, outcome.left_grid) {
             (Some(particle), _) => Some(StepError::NonFinite { step, particle, cause: cause() }),
             (None, Some(particle)) => Some(StepError::LeftGrid { step, particle, cause: cause() }),
@@ -532,7 +558,7 @@ where
         match error {
             Some(e) => {
                 // A later call must not trust the binning of a state that went bad.
-                self.scratch.schedule.invalidate();
+                state.binning.drift = Real::INFINITY;
                 Err(e)
             }
             None => Ok(()),
@@ -542,14 +568,15 @@ where
     /// Density (kg/m³, or kg/m² in 2D) of each particle in the last step, as its material saw it
     /// (fluids: ρ0/J̄ or gathered from the regular grid), zero before the first step.
     pub fn grid_density(&self) -> &[Real] {
-        &self.scratch.density
+        &self.state.density
     }
 
     /// Kinetic energy and wall penetration of the current state.
     pub fn metrics(&self) -> Metrics {
         let region = self.model.region.as_ref();
         let (mut n_outside, mut deepest) = (0usize, 0.0 as Real);
-        for x in &self.particles.x {
+        let state = &self.state;
+        for x in &state.particles.x {
             let d = region.distance(x).distance;
             if d > 0.0 {
                 n_outside += 1;
@@ -557,15 +584,15 @@ where
             }
         }
         Metrics {
-            step: self.step,
-            time: self.time,
-            kinetic_energy: self.particles.kinetic_energy(),
+            step: state.step,
+            time: state.time,
+            kinetic_energy: state.particles.kinetic_energy(),
             n_outside,
             max_penetration: deepest / self.model.layout.h,
-            ill_conditioned: self.ill_conditioned,
-            low_mass_nodes: self.low_mass_nodes,
-            held_at_wall: self.held_at_wall,
-            max_cfl: self.last_move,
+            ill_conditioned: state.ill_conditioned,
+            low_mass_nodes: state.low_mass_nodes,
+            held_at_wall: state.held_at_wall,
+            max_cfl: state.max_cfl,
         }
     }
 }

@@ -582,6 +582,7 @@ mod tests {
     use super::*;
     use crate::geometry::{Point, Polygon, WallShape, Walls2};
     use crate::material::WeaklyCompressibleFluid;
+    use crate::schedule::Binning;
     use nalgebra::{Matrix2, Vector2};
 
     fn random_particles(n: usize) -> Particles<2> {
@@ -622,7 +623,7 @@ mod tests {
         let layout = GridLayout::<2>::new(h, [20, 20]);
         let mut ps = random_particles(300);
         let mut schedule = Schedule::new(&layout);
-        schedule.sort(&layout, &ps.x).unwrap();
+        schedule.sort(&layout, &ps.x, &mut Binning::default()).unwrap();
         let t = Transfer { layout: &layout, schedule: &schedule, augmented: None };
         let mut grid = GridState::new(layout.num_nodes());
         let mut density = vec![0.0; ps.len()];
@@ -700,7 +701,7 @@ mod tests {
             }
         }
         let mut schedule = Schedule::new(&layout);
-        schedule.sort(&layout, &x).unwrap();
+        schedule.sort(&layout, &x, &mut Binning::default()).unwrap();
         let mut grid_mass = vec![0.0; layout.num_nodes()];
         scatter_mass(&layout, &schedule, &x, &mass, &mut grid_mass);
         let probe = Stencil::new(&Point::new(0.5, floor + 0.2 * h), 1.0 / h);
@@ -759,7 +760,7 @@ mod tests {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             pool.install(|| {
                 let mut schedule = Schedule::new(&layout);
-                schedule.sort(&layout, &ps.x).unwrap();
+                schedule.sort(&layout, &ps.x, &mut Binning::default()).unwrap();
                 assert!(schedule.parallel());
                 let t = Transfer { layout: &layout, schedule: &schedule, augmented: None };
                 let mut grid = GridState::new(layout.num_nodes());
@@ -781,7 +782,7 @@ mod tests {
         let layout = GridLayout::<2>::new(0.02, [50, 50]);
         let mut ps = random_particles(100);
         let mut schedule = Schedule::new(&layout);
-        schedule.sort(&layout, &ps.x).unwrap();
+        schedule.sort(&layout, &ps.x, &mut Binning::default()).unwrap();
         ps.x[7].x += 12.0 * layout.h; // more than a block (8) plus the slack (2)
         let t = Transfer { layout: &layout, schedule: &schedule, augmented: None };
         let mut grid = GridState::new(layout.num_nodes());

@@ -124,15 +124,15 @@ fn ill_conditioned_particles_are_counted_in_a_run() {
     let scene = augmpm_core::Scene::from_json(json).unwrap();
     let (mut sim, _) = scene.build(augmpm_core::Method::Augmented).unwrap();
     let h = sim.model.layout.h;
-    sim.particles.x[0] = Point::new(0.5, 0.3 - 1.2 * h); // sees only the floor's boundary points
-    sim.particles.x[1] = Point::new(0.5, 0.1); // deep in the wall: sees nothing
+    sim.state.particles.x[0] = Point::new(0.5, 0.3 - 1.2 * h); // sees only the floor's boundary points
+    sim.state.particles.x[1] = Point::new(0.5, 0.1); // deep in the wall: sees nothing
     sim.step().unwrap();
     let m = sim.metrics();
     assert_eq!(m.ill_conditioned, 2);
     assert_eq!(m.n_outside, 2);
     // Neither moves deeper: the sticky floor's points hold the first, the second has no points.
-    assert!(sim.particles.v[0].y >= -1e-12 && sim.particles.v[1].y >= -1e-12);
-    assert!(sim.particles.v.iter().all(|v| v.iter().all(|c| c.is_finite())));
+    assert!(sim.state.particles.v[0].y >= -1e-12 && sim.state.particles.v[1].y >= -1e-12);
+    assert!(sim.state.particles.v.iter().all(|v| v.iter().all(|c| c.is_finite())));
 }
 
 /// No-slip: a Couette-like velocity u = U_wall + s·(distance from the wall) interpolates to exactly

@@ -8,7 +8,7 @@ fn build(json: &str) -> Simulation<2> {
 }
 
 fn centre_of_mass(sim: &Simulation<2>) -> nalgebra::Vector2<f64> {
-    let p = &sim.particles;
+    let p = &sim.state.particles;
     let m: f64 = p.mass.iter().sum();
     p.x.iter().zip(&p.mass).fold(nalgebra::Vector2::zeros(), |a, (x, mi)| a + x * *mi) / m
 }
@@ -27,13 +27,13 @@ fn free_fall_matches_g_t2_over_2() {
     let y0 = centre_of_mass(&sim).y;
     let n = 200u64;
     sim.advance(n).unwrap();
-    let (g, dt, t) = (9.81, 1e-3, sim.time);
+    let (g, dt, t) = (9.81, 1e-3, sim.time());
     let y = centre_of_mass(&sim).y;
     let discrete = y0 - g * dt * dt * (n * (n + 1)) as f64 / 2.0;
     assert!((y - discrete).abs() < 1e-10, "y = {y}, discrete = {discrete}");
     assert!((y - (y0 - g * t * t / 2.0)).abs() <= g * t * dt / 2.0 + 1e-10);
     // Uniform motion leaves the block undeformed.
-    assert!(sim.particles.f.iter().all(|f| (f - nalgebra::Matrix2::identity()).norm() < 1e-10));
+    assert!(sim.state.particles.f.iter().all(|f| (f - nalgebra::Matrix2::identity()).norm() < 1e-10));
 }
 
 /// An elastic block on a sticky floor stays at rest: its static sag under its own
@@ -51,7 +51,7 @@ fn elastic_block_rests_on_floor() {
     let c0 = centre_of_mass(&sim);
     sim.advance(2000).unwrap();
     let drift = (centre_of_mass(&sim) - c0).norm();
-    let vmax = sim.particles.v.iter().map(|v| v.norm()).fold(0.0, f64::max);
+    let vmax = sim.state.particles.v.iter().map(|v| v.norm()).fold(0.0, f64::max);
     assert!(drift < 0.02 * h, "centre of mass moved {} h", drift / h);
     assert!(vmax < 1e-2, "max speed {vmax} m/s");
     assert_eq!(sim.metrics().n_outside, 0);
@@ -68,6 +68,6 @@ fn runs_are_reproducible() {
     let (mut a, mut b) = (build(json), build(json));
     a.advance(100).unwrap();
     b.advance(100).unwrap();
-    assert_eq!(a.particles.x, b.particles.x);
-    assert_eq!(a.particles.v, b.particles.v);
+    assert_eq!(a.state.particles.x, b.state.particles.x);
+    assert_eq!(a.state.particles.v, b.state.particles.v);
 }

@@ -25,7 +25,11 @@ fn restored_run_is_bitwise_identical() {
         let mut whole = build(DROP, method);
         whole.advance(70).unwrap();
         let saved = whole.state();
-        assert!(saved.drift > 0.0 && saved.drift.is_finite(), "save between binnings, drift {}", saved.drift);
+        assert!(
+            saved.binning.drift > 0.0 && saved.binning.drift.is_finite(),
+            "save between binnings, drift {}",
+            saved.binning.drift
+        );
         whole.advance(50).unwrap();
 
         let mut resumed = build(DROP, method);
@@ -44,7 +48,7 @@ fn restored_run_is_bitwise_identical() {
 fn restore_when_rebinning_is_due_and_into_a_used_simulation() {
     let mut whole = build(DROP, Method::Augmented);
     let mut saved = whole.state();
-    while saved.drift <= augmpm_core::schedule::SLACK || !saved.drift.is_finite() {
+    while saved.binning.drift <= augmpm_core::schedule::SLACK || !saved.binning.drift.is_finite() {
         whole.advance(1).unwrap();
         saved = whole.state();
     }
@@ -56,7 +60,7 @@ fn restore_when_rebinning_is_due_and_into_a_used_simulation() {
     let mut original = build(DROP, Method::Augmented);
     original.advance(70).unwrap();
     let between = original.state();
-    assert!(between.drift <= augmpm_core::schedule::SLACK);
+    assert!(between.binning.drift <= augmpm_core::schedule::SLACK);
     original.advance(150).unwrap();
     let mut used = build(DROP, Method::Augmented);
     used.advance(300).unwrap();
@@ -88,7 +92,7 @@ fn restore_refuses_a_state_that_does_not_fit() {
     refused(&mut sim, s, "material 7");
     let mut s = good.clone();
     s.particles.x[0].x = f64::NAN;
-    refused(&mut sim, s, "non-finite");
+    refused(&mut sim, s, "x of particle 0 is not finite");
     let mut s = good.clone();
     s.particles.x[0].x += 0.5; // 16 cells from where it was binned
     refused(&mut sim, s, "not within reach");
@@ -96,7 +100,7 @@ fn restore_refuses_a_state_that_does_not_fit() {
     s.particles.body[1] = 1;
     refused(&mut sim, s, "body 1");
     let mut s = good.clone();
-    s.bins[0] = u32::MAX - 1;
+    s.binning.bins[0] = u32::MAX - 1;
     refused(&mut sim, s, "not one of the grid's");
     assert!(sim.state() == good, "a refused state changed the simulation");
 }
@@ -114,9 +118,9 @@ fn blow_up_names_its_cause_and_stops() {
     );
     let err = sim.advance(1000).unwrap_err();
     assert!(err.to_string().contains("likely cause: time.dt = 5e-2 s exceeds"), "{err}");
-    let step = sim.step;
+    let step = sim.steps_done();
     assert_eq!(sim.advance(1).unwrap_err(), err);
-    assert_eq!(sim.step, step);
+    assert_eq!(sim.steps_done(), step);
 }
 
 /// A block thrown at 60 m/s with dt = 1 ms on cells of 1/32 m jumps 1.9 cells per step: the
@@ -146,7 +150,7 @@ fn a_particle_outrunning_the_grid_is_stopped() {
 fn memory_estimate_predicts_the_seeding() {
     let scene = Scene::from_json(DROP).unwrap();
     let estimate = scene.memory_estimate().unwrap();
-    let seeded = scene.build(Method::Naive).unwrap().0.particles.len() as f64;
+    let seeded = scene.build(Method::Naive).unwrap().0.particles().len() as f64;
     // π 0.2² m² / (1/64 m)² = 491 particles expected; the jittered grid seeds within a few of it.
     assert!((estimate.particles as f64 / seeded - 1.0).abs() < 0.03, "{} vs {seeded}", estimate.particles);
     assert_eq!(estimate.nodes, 37 * 37);

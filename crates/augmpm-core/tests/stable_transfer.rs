@@ -9,7 +9,7 @@ use augmpm_core::grid::{GridLayout, GridState};
 use augmpm_core::material::{Material, WeaklyCompressibleFluid};
 use augmpm_core::math::{Dim, Real};
 use augmpm_core::particles::Particles;
-use augmpm_core::schedule::Schedule;
+use augmpm_core::schedule::{Binning, Schedule};
 use augmpm_core::transfer::{g2p, grid_velocity, p2g, Transfer};
 use augmpm_core::wall::WallCondition;
 use nalgebra::{Matrix2, Vector2};
@@ -65,7 +65,7 @@ fn setup(walls: Walls2, condition: WallCondition, ps: &Particles<2>, transfer: A
     let grid = AugmentedGrid::new(&layout, &walls, points, vec![condition; walls.walls.len() + 1], 0.25 * H)
         .with_transfer(transfer);
     let mut schedule = Schedule::new(&layout);
-    schedule.sort(&layout, &ps.x).unwrap();
+    schedule.sort(&layout, &ps.x, &mut Binning::default()).unwrap();
     let mut table = WallParticles::default();
     let ill = table.update::<Dim<2>>(&grid, &layout, &ps.x).unwrap();
     assert_eq!(ill, 0, "the particles lie inside the region: no MLS system is degenerate");

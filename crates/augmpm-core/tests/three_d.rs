@@ -154,12 +154,12 @@ fn a_cube_falls_and_stays_in_a_box_with_both_wall_treatments() {
     for material in materials() {
         for augmented in [false, true] {
             let mut sim = simulation(material.clone(), augmented);
-            let y0: Real = sim.particles.x.iter().map(|x| x.y).sum::<Real>() / sim.particles.len() as Real;
+            let y0: Real = sim.state.particles.x.iter().map(|x| x.y).sum::<Real>() / sim.state.particles.len() as Real;
             let steps = |t: Real, dt: Real| (t / dt).round() as u64;
             let dt = sim.model.dt;
             sim.advance(steps(0.1, dt)).unwrap();
-            let t = sim.time;
-            let y: Real = sim.particles.x.iter().map(|x| x.y).sum::<Real>() / sim.particles.len() as Real;
+            let t = sim.time();
+            let y: Real = sim.state.particles.x.iter().map(|x| x.y).sum::<Real>() / sim.state.particles.len() as Real;
             let fall = 0.5 * 9.81 * t * t;
             assert!(
                 ((y0 - y) - fall).abs() < 0.02 * fall,
@@ -168,7 +168,7 @@ fn a_cube_falls_and_stays_in_a_box_with_both_wall_treatments() {
             );
             sim.advance(steps(0.3, dt)).unwrap();
             let m = sim.metrics();
-            assert!(sim.particles.x.iter().all(|x| x.iter().all(|c| c.is_finite())));
+            assert!(sim.state.particles.x.iter().all(|x| x.iter().all(|c| c.is_finite())));
             if augmented {
                 assert_eq!(m.n_outside, 0, "{material:?}: {m:?}");
             } else {

@@ -11,8 +11,8 @@ use nalgebra::Vector2;
 use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 
+use crate::convert::{parse_method, rows, vectors_to_array};
 use crate::errors::{guard, scene_error};
-use crate::{parse_method, rows, vectors_to_array};
 
 /// Reconstructed values (M,) and gradients (M, 2).
 type ValuesAndGradients<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>);
@@ -71,7 +71,7 @@ impl PyGrid {
         py: Python<'py>,
         points: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let pts = rows(&points)?;
+        let pts = rows::<2>(&points)?;
         guard(|| Ok(PyArray1::from_vec(py, pts.iter().map(|x| self.region.distance(x).distance).collect())))
     }
 
@@ -106,7 +106,7 @@ impl PyGrid {
                 &format!("must hold one entry per node and boundary point ({expected}), got {}", values.len()),
             ));
         }
-        let pts = rows(&query)?;
+        let pts = rows::<2>(&query)?;
         let h = self.layout.h;
         let nan = (f64::NAN, Vector2::repeat(f64::NAN));
         let out: Vec<(f64, Vector2<f64>)> = pts

@@ -1,0 +1,94 @@
+//! Checkpoints: a simulation's [`State`](augmpm_core::State) as a dict of numpy arrays (one per
+//! per-particle field of `State::fields`, float64 or uint32, shape (N, ...)) and scalars (one per
+//! `State::scalars`), and back. The field table of the core drives both directions, for any D and
+//! either precision.
+
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+use crate::errors::scene_error;
+
+/// The checkpoint's arrays, from the core's field table (2D): name, dtype, shape after the particle
+/// axis, unit and doc line of each.
+#[pyfunction]
+pub fn state_fields(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
+    let items = augmpm_core::State::<2>::fields()
+        .map(|f| {
+            let d = PyDict::new(py);
+            d.set_item("name", f.name)?;
+            let dtype = if f.kind == augmpm_core::particles::FieldKind::Index { "uint32" } else { "float64" };
+            d.set_item("dtype", dtype)?;
+            d.set_item("shape", f.kind.shape(2))?;
+            d.set_item("unit", f.unit)?;
+            d.set_item("doc", f.doc)?;
+            Ok(d)
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    PyList::new(py, items)
+}
+
+/// `to_dict` and `from_dict` for the state of one core crate (the f64 or the f32 engine).
+macro_rules! state_conversions {
+    ($name:ident, $core:ident) => {
+        pub mod $name {
+            use super::*;
+            use crate::convert::{array_of, rows_of};
+            use numpy::{PyArray1, PyArrayMethods};
+            use $core::particles::{Column, ColumnMut};
+            use $core::solver::Scalar;
+            use $core::State;
+
+            /// The state as a dict: arrays by field name, then the scalars.
+            pub fn to_dict<'py, const D: usize>(py: Python<'py>, mut state: State<D>) -> PyResult<Bound<'py, PyDict>> {
+                let d = PyDict::new(py);
+                let n = state.particles.len();
+                for (field, column) in State::<D>::fields().zip(state.columns()) {
+                    let mut shape = vec![n];
+                    shape.extend(field.kind.shape(D));
+                    match (&column, column.to_f64()) {
+                        (Column::Index(a), _) => d.set_item(field.name, PyArray1::from_slice(py, a))?,
+                        (_, Some(data)) => d.set_item(field.name, PyArray1::from_vec(py, data).reshape(shape)?)?,
+                        (_, None) => unreachable!("only index columns have no reals"),
+                    }
+                }
+                for (name, scalar) in state.scalars() {
+                    match scalar {
+                        Scalar::Count(v) => d.set_item(name, *v)?,
+                        Scalar::Real(v) => d.set_item(name, crate::convert::wide(*v))?,
+                    }
+                }
+                Ok(d)
+            }
+
+            /// The state a dict from [`to_dict`] holds; a missing entry, a wrong dtype or shape raises
+            /// SceneError naming it (`state.v`).
+            pub fn from_dict<const D: usize>(dict: &Bound<'_, PyDict>) -> PyResult<State<D>> {
+                let n = rows_of::<f64>(dict, "x", "float64")?;
+                let mut state = State::<D>::new(Default::default());
+                for (field, mut column) in State::<D>::fields().zip(state.columns_mut()) {
+                    let tail = field.kind.shape(D);
+                    match &mut column {
+                        ColumnMut::Index(_) => {
+                            column.set_indices(&array_of::<u32>(dict, field.name, n, &tail, "uint32")?)
+                        }
+                        _ => column.set_f64(&array_of::<f64>(dict, field.name, n, &tail, "float64")?),
+                    }
+                }
+                for (name, scalar) in state.scalars() {
+                    let bad = |reason: &str| scene_error(&format!("state.{name}"), reason);
+                    let item = dict.get_item(name)?.ok_or_else(|| bad("missing"))?;
+                    match scalar {
+                        Scalar::Count(v) => *v = item.extract().map_err(|_| bad("must be a non-negative integer"))?,
+                        Scalar::Real(v) => {
+                            *v = item.extract::<f64>().map_err(|_| bad("must be a number"))? as $core::math::Real
+                        }
+                    }
+                }
+                Ok(state)
+            }
+        }
+    };
+}
+
+state_conversions!(double, augmpm_core);
+state_conversions!(single, augmpm_core_f32);

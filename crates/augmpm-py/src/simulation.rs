@@ -1,0 +1,319 @@
+//! `augmpm._core.Simulation`: a 2D simulation built from a resolved scene (JSON), in the scene's
+//! precision; steps, arrays of the particles, metrics, checkpoints.
+
+use numpy::{PyArray1, PyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::checkpoint;
+use crate::convert::{parse_method, rows, scalars_to_array, vectors_to_array, wide};
+use crate::errors::{self, guard, scene_error, simulation_error};
+
+/// The engine of a simulation, in the scene's precision: the same core sources compiled with
+/// `Real = f64` (`augmpm-core`) or `Real = f32` (`augmpm-core-f32`).
+enum Engine {
+    F64(augmpm_core::Simulation<2>),
+    F32(augmpm_core_f32::Simulation<2>),
+}
+
+/// Runs `$body` on the simulation of either precision, with `$core` naming its crate.
+macro_rules! with_sim {
+    ($engine:expr, $s:ident, $core:ident => $body:expr) => {
+        match $engine {
+            Engine::F64($s) => {
+                #[allow(unused_imports)]
+                use augmpm_core as $core;
+                $body
+            }
+            Engine::F32($s) => {
+                #[allow(unused_imports)]
+                use augmpm_core_f32 as $core;
+                $body
+            }
+        }
+    };
+}
+
+/// A 2D simulation built from a resolved scene (JSON) with a boundary method.
+#[pyclass(name = "Simulation", module = "augmpm._core")]
+pub struct PySimulation {
+    engine: Engine,
+    warnings: Vec<String>,
+    /// Set when a Rust panic interrupted a call: the state can no longer be trusted.
+    broken: Option<String>,
+}
+
+impl PySimulation {
+    fn build(scene_json: &str, method: &str, threads: usize, memory_limit: Option<u64>) -> PyResult<Self> {
+        parse_method(method)?;
+        let value: serde_json::Value =
+            serde_json::from_str(scene_json).map_err(|e| scene_error("scene", &format!("not valid JSON: {e}")))?;
+        let bad = |e: augmpm_core::SceneError| scene_error(&e.key, &e.reason);
+        let bad32 = |e: augmpm_core_f32::SceneError| scene_error(&e.key, &e.reason);
+        let (engine, warnings) = match value.get("precision").and_then(|p| p.as_str()).unwrap_or("f64") {
+            "f32" => {
+                let scene = augmpm_core_f32::Scene::from_json(scene_json).map_err(bad32)?;
+                if let Some(limit) = memory_limit {
+                    scene.memory_estimate().and_then(|m| m.check(limit)).map_err(bad32)?;
+                }
+                let method =
+                    if method == "naive" { augmpm_core_f32::Method::Naive } else { augmpm_core_f32::Method::Augmented };
+                let (sim, warnings) = scene.build(method).map_err(bad32)?;
+                (Engine::F32(sim), warnings)
+            }
+            _ => {
+                let scene = augmpm_core::Scene::from_json(scene_json).map_err(bad)?;
+                if let Some(limit) = memory_limit {
+                    scene.memory_estimate().and_then(|m| m.check(limit)).map_err(bad)?;
+                }
+                let (sim, warnings) = scene.build(parse_method(method)?).map_err(bad)?;
+                (Engine::F64(sim), warnings)
+            }
+        };
+        let mut this = Self { engine, warnings, broken: None };
+        with_sim!(&mut this.engine, s, core => s.set_threads(threads)).map_err(|e| scene_error("threads", &e))?;
+        Ok(this)
+    }
+
+    /// Refuses to touch an engine that a panic interrupted.
+    fn usable(&self) -> PyResult<()> {
+        match &self.broken {
+            None => Ok(()),
+            Some(why) => Err(errors::Error::new_err(format!(
+                "this simulation is unusable after an internal error ({why}); build a new one"
+            ))),
+        }
+    }
+
+    /// Runs `f` on the engine as [`guard`] does; a panic also marks the simulation unusable.
+    fn guarded<T>(&mut self, f: impl FnOnce(&mut Engine) -> PyResult<T>) -> PyResult<T> {
+        self.usable()?;
+        let engine = &mut self.engine;
+        errors::catch_panic(|| f(engine)).unwrap_or_else(|message| {
+            self.broken = Some(message.clone());
+            Err(errors::internal_error(&message))
+        })
+    }
+}
+
+#[pymethods]
+impl PySimulation {
+    #[new]
+    #[pyo3(signature = (scene_json, method, threads=0, memory_limit=None))]
+    fn new(scene_json: &str, method: &str, threads: usize, memory_limit: Option<u64>) -> PyResult<Self> {
+        guard(|| Self::build(scene_json, method, threads, memory_limit))
+    }
+
+    /// The state of the run, for a checkpoint: a dict of numpy arrays (one per field of
+    /// `state_fields()`; float64 reals in either precision, exact) and scalars, which
+    /// [`PySimulation::restore`] takes back.
+    fn checkpoint<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.guarded(|engine| match engine {
+            Engine::F64(s) => checkpoint::double::to_dict(py, s.state()),
+            Engine::F32(s) => checkpoint::single::to_dict(py, s.state()),
+        })
+    }
+
+    /// Continues from a state returned by [`PySimulation::checkpoint`] of a simulation of the same
+    /// scene and method; the steps that follow are bitwise identical to the saved run's. A state
+    /// that does not fit raises SceneError naming the entry, and leaves the simulation as it was.
+    fn restore(&mut self, state: &Bound<'_, PyDict>) -> PyResult<()> {
+        self.guarded(|engine| {
+            match engine {
+                Engine::F64(s) => s.restore(checkpoint::double::from_dict(state)?),
+                Engine::F32(s) => s.restore(checkpoint::single::from_dict(state)?),
+            }
+            .map_err(|e| scene_error("state", &e))
+        })
+    }
+
+    /// Floating-point precision of the engine: "f32" or "f64".
+    #[getter]
+    fn precision(&self) -> &'static str {
+        match self.engine {
+            Engine::F64(_) => "f64",
+            Engine::F32(_) => "f32",
+        }
+    }
+
+    /// Number of threads the steps run on.
+    #[getter]
+    fn threads(&self) -> usize {
+        with_sim!(&self.engine, s, core => s.threads())
+    }
+
+    /// Heap bytes of the particle state, the per-particle scratch and the grid.
+    fn memory_use<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let (particles, scratch, grid) = guard(|| {
+            Ok(with_sim!(&self.engine, s, core => {
+                let m = s.memory_use();
+                (m.particles, m.particle_scratch, m.grid)
+            }))
+        })?;
+        let d = PyDict::new(py);
+        d.set_item("particles", particles)?;
+        d.set_item("particle_scratch", scratch)?;
+        d.set_item("grid", grid)?;
+        Ok(d)
+    }
+
+    /// Wall-clock seconds spent so far in each stage of the step: sort, density, boundary, p2g, grid, g2p.
+    fn stage_times<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let t = guard(|| {
+            Ok(with_sim!(&self.engine, s, core => {
+                let t = s.stage_times();
+                [t.sort, t.density, t.boundary, t.p2g, t.grid, t.g2p]
+            }))
+        })?;
+        let d = PyDict::new(py);
+        for (k, v) in ["sort", "density", "boundary", "p2g", "grid", "g2p"].into_iter().zip(t) {
+            d.set_item(k, v)?;
+        }
+        Ok(d)
+    }
+
+    /// Takes `n` steps (the GIL is released meanwhile). Raises SimulationError on failure;
+    /// the state is then that of the failing step.
+    fn step(&mut self, py: Python<'_>, n: u64) -> PyResult<()> {
+        self.guarded(|engine| {
+            with_sim!(engine, s, core => {
+                let earlier = s.failure().is_some();
+                py.allow_threads(|| s.advance(n)).map_err(|e| {
+                    let again = if earlier { " (it failed earlier; restore a checkpoint or build a new simulation)" } else { "" };
+                    simulation_error(format!("{e}{again}"), e.location())
+                })
+            })
+        })
+    }
+
+    /// Particle positions (m), shape (N, 2).
+    #[getter]
+    fn positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        guard(|| with_sim!(&self.engine, s, core => vectors_to_array(py, &s.particles().x)))
+    }
+
+    /// Particle velocities (m/s), shape (N, 2).
+    #[getter]
+    fn velocities<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        guard(|| with_sim!(&self.engine, s, core => vectors_to_array(py, &s.particles().v)))
+    }
+
+    /// Index of each particle's body, shape (N,).
+    #[getter]
+    fn body<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<i32>>> {
+        guard(|| {
+            Ok(
+                with_sim!(&self.engine, s, core => PyArray1::from_iter(py, s.particles().body.iter().map(|&b| b as i32))),
+            )
+        })
+    }
+
+    /// Particle masses (kg/m in 2D), shape (N,).
+    #[getter]
+    fn masses<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        guard(|| Ok(with_sim!(&self.engine, s, core => scalars_to_array(py, &s.particles().mass))))
+    }
+
+    /// Fluid density of each particle in the last step (kg/m²), shape (N,): ρ0/J or gathered from the grid.
+    #[getter]
+    fn densities<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        guard(|| Ok(with_sim!(&self.engine, s, core => scalars_to_array(py, s.grid_density()))))
+    }
+
+    #[getter]
+    fn num_particles(&self) -> usize {
+        with_sim!(&self.engine, s, core => s.particles().len())
+    }
+
+    /// Time (s).
+    #[getter]
+    fn time(&self) -> f64 {
+        with_sim!(&self.engine, s, core => wide(s.time()))
+    }
+
+    /// Steps taken so far.
+    #[getter]
+    fn steps_done(&self) -> u64 {
+        with_sim!(&self.engine, s, core => s.steps_done())
+    }
+
+    /// Time step (s).
+    #[getter]
+    fn dt(&self) -> f64 {
+        with_sim!(&self.engine, s, core => wide(s.model.dt))
+    }
+
+    /// The materials' stable time step (s) on this grid.
+    #[getter]
+    fn stable_dt(&self) -> PyResult<f64> {
+        guard(|| Ok(with_sim!(&self.engine, s, core => wide(s.model.stable_dt()))))
+    }
+
+    /// Grid cell width h (m).
+    #[getter]
+    fn cell_size(&self) -> f64 {
+        with_sim!(&self.engine, s, core => wide(s.model.layout.h))
+    }
+
+    /// Warnings raised while building the simulation (e.g. dt above the stable bound).
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.warnings.clone()
+    }
+
+    /// Signed distance (m) of points (M, 2) to the walls, positive outside the material region.
+    fn wall_distance<'py>(
+        &self,
+        py: Python<'py>,
+        points: numpy::PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let points = rows::<2>(&points)?;
+        guard(|| {
+            let d: Vec<f64> = with_sim!(&self.engine, s, core => {
+                let region = s.model.region.as_ref();
+                points.iter().map(|x| wide(region.distance(&x.cast::<core::math::Real>()).distance)).collect()
+            });
+            Ok(PyArray1::from_vec(py, d))
+        })
+    }
+
+    /// Boundary grid points of the augmented grid, shape (B, 2); empty for the naive method.
+    #[getter]
+    fn boundary_points<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        guard(|| {
+            with_sim!(&self.engine, s, core => {
+                let xs: Vec<_> = match &s.model.boundary {
+                    core::solver::Boundary::Augmented(g) => g.points.iter().map(|p| p.x).collect(),
+                    core::solver::Boundary::Naive(_) => Vec::new(),
+                };
+                vectors_to_array(py, &xs)
+            })
+        })
+    }
+
+    /// Step, time, kinetic energy, particles outside the walls, the deepest penetration (cell widths),
+    /// and the augmented grid's counts of ill-conditioned particle-steps and low-mass node-steps.
+    fn metrics<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        let m = guard(|| {
+            Ok(with_sim!(&self.engine, s, core => {
+                let m = s.metrics();
+                (m.step, wide(m.time), wide(m.kinetic_energy), m.n_outside, wide(m.max_penetration),
+                 m.ill_conditioned, m.low_mass_nodes, m.held_at_wall, wide(m.max_cfl))
+            }))
+        })?;
+        {
+            let (step, time, kinetic_energy, n_outside, max_penetration, ill, low, held, cfl) = m;
+            d.set_item("step", step)?;
+            d.set_item("time", time)?;
+            d.set_item("kinetic_energy", kinetic_energy)?;
+            d.set_item("n_outside", n_outside)?;
+            d.set_item("max_penetration", max_penetration)?;
+            d.set_item("ill_conditioned", ill)?;
+            d.set_item("low_mass_nodes", low)?;
+            d.set_item("held_at_wall", held)?;
+            d.set_item("max_cfl", cfl)?;
+        }
+        Ok(d)
+    }
+}
