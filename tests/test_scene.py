@@ -110,6 +110,21 @@ def test_scenes_built_or_changed_in_code_report_bad_values_as_scene_errors(small
     assert err.value.key == "steps" and "greater than or equal to 0" in str(err.value), str(err.value)
 
 
+def test_did_you_mean_looks_in_the_table_of_the_misspelled_key(small_scene):
+    """A misspelled key is matched against the keys of its own table: a material key is suggested inside a
+    material, and a key of another table (`stiffness` is no key of a box body) is never suggested."""
+    data = copy.deepcopy(small_scene)
+    data["bodies"][0]["material"]["densty"] = 1.0
+    with pytest.raises(augmpm.SceneError) as err:
+        augmpm.Scene.from_dict(data)
+    assert str(err.value) == "bodies[0].material.densty: unknown key (did you mean 'density'?)"
+    data = copy.deepcopy(small_scene)
+    data["grid"]["stiffnes"] = 1.0
+    with pytest.raises(augmpm.SceneError) as err:
+        augmpm.Scene.from_dict(data)
+    assert str(err.value) == "grid.stiffnes: unknown key"
+
+
 def test_a_polygon_closed_by_repeating_its_first_vertex_is_accepted(small_scene):
     """A wall polygon that ends on its first vertex (closed, as many tools write polygons) builds and runs the
     same simulation as without the repeat, bit for bit."""

@@ -283,6 +283,22 @@ def _scene_keys() -> set[str]:
     return keys
 
 
+def _keys_at(loc: tuple[Any, ...]) -> set[str]:
+    """The keys of the table at ``loc`` (a pydantic error location, list indices and choice tags
+    included), or an empty set when the path leads to no single table."""
+    models: list[type[BaseModel]] = [Scene]
+    for part in loc:
+        if isinstance(part, int):
+            continue
+        if part in _TAGS:  # the option of a choice: keep the model whose tag it is
+            models = [m for m in models if any(part in typing.get_args(f.annotation) for f in m.model_fields.values())]
+            continue
+        fields = [m.model_fields[part] for m in models if part in m.model_fields]
+        types = [t for f in fields for t in _types_in(f.annotation)]
+        models = [t for t in types if isinstance(t, type) and issubclass(t, BaseModel)]
+    return set().union(*(m.model_fields for m in models))
+
+
 def _types_in(annotation: Any) -> list[Any]:
     """The types an annotation names, through unions, lists, tuples and Annotated."""
     args = typing.get_args(annotation)
@@ -298,7 +314,8 @@ def _scene_error(e: ValidationError) -> SceneError:
     reason = first["msg"]
     if first["type"] == "extra_forbidden":
         reason = "unknown key"
-        keys = _scene_keys() - {str(loc[-1])} if loc else set()
+        keys = _keys_at(loc[:-1]) or _scene_keys()
+        keys -= {str(loc[-1])} if loc else set()
         guess = difflib.get_close_matches(str(loc[-1]), keys, n=1, cutoff=0.75) if loc else []
         if guess:
             reason += f" (did you mean {guess[0]!r}?)"

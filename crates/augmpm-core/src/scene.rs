@@ -1,14 +1,15 @@
 //! Scene description (the resolved form of a scene file) and how a 2D
 //! simulation is built from it: validation, walls, particle seeding.
 
-use crate::augmented::{AugmentedGrid, AugmentedTransfer};
-use crate::boundary::{Method, NaiveBoundary};
 use crate::geometry::{Circle, Point, Polygon, Region, Side, SurfaceMotion, WallShape, Walls2};
 use crate::grid::GridLayout;
 use crate::material::Material;
 use crate::math::{Precision, Real};
 use crate::particles::Particles;
-use crate::solver::{Boundary, Model, Simulation};
+use crate::simulation::{Model, Simulation};
+use crate::treatment::augmented::{AugmentedGrid, AugmentedTransfer};
+use crate::treatment::naive::NaiveBoundary;
+use crate::treatment::{Boundary, Method};
 use crate::wall::WallCondition;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -307,10 +308,11 @@ const GRID_BYTES_PER_NODE: u64 = 7 * std::mem::size_of::<Real>() as u64;
 const MAX_SEED_CANDIDATES: u64 = 20_000_000;
 
 /// Bytes per particle of a running simulation: its state (the per-particle fields of
-/// [`crate::State::fields`]), the schedule's order (one index) and, while seeding, the candidate
+/// [`crate::simulation::State::fields`]), the schedule's order (one index) and, while seeding, the candidate
 /// positions and the growth of the arrays (four reals).
 fn particle_bytes() -> u64 {
-    (crate::State::<2>::bytes_per_particle() + std::mem::size_of::<u32>() + 4 * std::mem::size_of::<Real>()) as u64
+    (crate::simulation::State::<2>::bytes_per_particle() + std::mem::size_of::<u32>() + 4 * std::mem::size_of::<Real>())
+        as u64
 }
 
 /// What a scene will need in memory, estimated without allocating it.
@@ -685,7 +687,7 @@ impl Scene {
         }
         let wall_fraction = (self.grid.density_wall_correction
             && materials.iter().any(crate::material::ConstitutiveModel::<2>::needs_grid_density))
-        .then(|| crate::transfer::wall_fractions(&layout, &region));
+        .then(|| crate::step::transfer::wall_fractions(&layout, &region));
         let mut model = Model {
             layout,
             materials,

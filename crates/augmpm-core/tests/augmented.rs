@@ -1,11 +1,11 @@
 //! The augmented grid reproduces linear fields exactly up to and along the walls,
 //! which the naive grid (wall nodes holding the wall value) cannot.
 
-use augmpm_core::augmented::AugmentedGrid;
 use augmpm_core::geometry::{Point, Polygon, Region, WallShape, Walls2};
 use augmpm_core::grid::GridLayout;
 use augmpm_core::kernel::{MlsKind, Stencil};
 use augmpm_core::math::Dim;
+use augmpm_core::treatment::augmented::AugmentedGrid;
 use augmpm_core::wall::WallCondition;
 use proptest::prelude::*;
 

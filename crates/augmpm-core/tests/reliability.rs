@@ -1,7 +1,7 @@
 //! Faults and interruptions: failed steps name their cause, and a run restored from a saved
 //! state continues bitwise identically.
 
-use augmpm_core::solver::StepError;
+use augmpm_core::simulation::StepError;
 use augmpm_core::{Method, Scene, Simulation};
 
 fn build(json: &str, method: Method) -> Simulation<2> {
@@ -48,7 +48,7 @@ fn restored_run_is_bitwise_identical() {
 fn restore_when_rebinning_is_due_and_into_a_used_simulation() {
     let mut whole = build(DROP, Method::Augmented);
     let mut saved = whole.state();
-    while saved.binning.drift <= augmpm_core::schedule::SLACK || !saved.binning.drift.is_finite() {
+    while saved.binning.drift <= augmpm_core::step::schedule::SLACK || !saved.binning.drift.is_finite() {
         whole.advance(1).unwrap();
         saved = whole.state();
     }
@@ -60,7 +60,7 @@ fn restore_when_rebinning_is_due_and_into_a_used_simulation() {
     let mut original = build(DROP, Method::Augmented);
     original.advance(70).unwrap();
     let between = original.state();
-    assert!(between.binning.drift <= augmpm_core::schedule::SLACK);
+    assert!(between.binning.drift <= augmpm_core::step::schedule::SLACK);
     original.advance(150).unwrap();
     let mut used = build(DROP, Method::Augmented);
     used.advance(300).unwrap();

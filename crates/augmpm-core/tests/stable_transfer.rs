@@ -3,14 +3,14 @@
 //! keeps every mass positive and conserves momentum; the fit meets the wall condition at the wall.
 //! Derivation: docs/stable_transfer.md.
 
-use augmpm_core::augmented::{AugmentedGrid, AugmentedTransfer, WallParticles};
 use augmpm_core::geometry::{Point, Polygon, Region, WallDistance, WallShape, Walls2};
 use augmpm_core::grid::{GridLayout, GridState};
 use augmpm_core::material::{Material, WeaklyCompressibleFluid};
 use augmpm_core::math::{Dim, Real};
 use augmpm_core::particles::Particles;
-use augmpm_core::schedule::{Binning, Schedule};
-use augmpm_core::transfer::{g2p, grid_velocity, p2g, Transfer};
+use augmpm_core::step::schedule::{Binning, Schedule};
+use augmpm_core::step::transfer::{g2p, grid_velocity, p2g, Transfer};
+use augmpm_core::treatment::augmented::{AugmentedGrid, AugmentedTransfer, WallParticles};
 use augmpm_core::wall::WallCondition;
 use nalgebra::{Matrix2, Vector2};
 use proptest::prelude::*;

@@ -3,15 +3,16 @@
 //! treatments are generic over D. A box of material dropped into a box container must fall under
 //! gravity and stay inside it, with either treatment.
 
-use augmpm_core::augmented::{AugmentedGrid, AugmentedTransfer};
-use augmpm_core::boundary::NaiveBoundary;
 use augmpm_core::geometry::{Region, WallDistance, WallFeet, WallFoot};
 use augmpm_core::grid::GridLayout;
 use augmpm_core::material::{DensityEstimate, FixedCorotated, Material, WeaklyCompressibleFluid};
 use augmpm_core::math::{Real, Vector};
 use augmpm_core::particles::Particles;
-use augmpm_core::solver::{Boundary, Model};
+use augmpm_core::simulation::Model;
+use augmpm_core::treatment::augmented::{AugmentedGrid, AugmentedTransfer};
+use augmpm_core::treatment::naive::NaiveBoundary;
 use augmpm_core::wall::{BoundaryPoint, WallCondition};
+use augmpm_core::Boundary;
 use augmpm_core::Simulation;
 
 type V3 = Vector<3>;

@@ -35,7 +35,7 @@ macro_rules! state_conversions {
             use crate::convert::{array_of, rows_of};
             use numpy::{PyArray1, PyArrayMethods};
             use $core::particles::{Column, ColumnMut};
-            use $core::solver::Scalar;
+            use $core::simulation::Scalar;
             use $core::State;
 
             /// The state as a dict: arrays by field name, then the scalars.

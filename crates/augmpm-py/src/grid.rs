@@ -3,10 +3,9 @@
 
 use augmpm_core::geometry::Region;
 use augmpm_core::grid::GridLayout;
-use augmpm_core::kernel::{MlsInverse, Stencil};
 use augmpm_core::math::Dim;
-use augmpm_core::solver::Boundary;
 use augmpm_core::Scene;
+use augmpm_core::{Boundary, WallTreatment};
 use nalgebra::Vector2;
 use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
@@ -49,19 +48,13 @@ impl PyGrid {
     /// Whether each regular node takes part in the interpolation, shape (N,).
     #[getter]
     fn included<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<bool>> {
-        match &self.boundary {
-            Boundary::Augmented(g) => PyArray1::from_slice(py, &g.included),
-            Boundary::Naive(_) => PyArray1::from_vec(py, vec![true; self.layout.num_nodes()]),
-        }
+        PyArray1::from_iter(py, (0..self.layout.num_nodes()).map(|i| self.boundary.includes(i)))
     }
 
     /// Boundary points (m), shape (B, 2); empty for the naive method.
     #[getter]
     fn boundary_points<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let xs: Vec<Vector2<f64>> = match &self.boundary {
-            Boundary::Augmented(g) => g.points.iter().map(|p| p.x).collect(),
-            Boundary::Naive(_) => Vec::new(),
-        };
+        let xs: Vec<Vector2<f64>> = self.boundary.boundary_points().iter().map(|p| p.x).collect();
         vectors_to_array(py, &xs)
     }
 
@@ -96,10 +89,7 @@ impl PyGrid {
         query: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<ValuesAndGradients<'py>> {
         let values = values.as_slice().map_err(|_| scene_error("values", "must be a contiguous float64 array"))?;
-        let expected = match &self.boundary {
-            Boundary::Augmented(g) => self.layout.num_nodes() + g.points.len(),
-            Boundary::Naive(_) => self.layout.num_nodes(),
-        };
+        let expected = self.boundary.num_points(&self.layout);
         if values.len() != expected {
             return Err(scene_error(
                 "values",
@@ -107,27 +97,14 @@ impl PyGrid {
             ));
         }
         let pts = rows::<2>(&query)?;
-        let h = self.layout.h;
         let nan = (f64::NAN, Vector2::repeat(f64::NAN));
         let out: Vec<(f64, Vector2<f64>)> = pts
             .iter()
-            .map(|x| match &self.boundary {
-                Boundary::Augmented(g) => {
-                    g.interpolate::<Dim<2>>(&self.layout, x, values).map(|(u, grad, _)| (u, grad)).unwrap_or(nan)
-                }
-                Boundary::Naive(_) => {
-                    let s = Stencil::new(x, 1.0 / h);
-                    let Some(origin) = self.layout.stencil_origin(&s.base) else { return nan };
-                    let minv = MlsInverse::<2>::regular(h);
-                    let (mut u, mut grad) = (0.0, Vector2::zeros());
-                    s.for_each(h, |o, w, d| {
-                        let (phi, g) = minv.shape(w, &d);
-                        let vi = values[origin + self.layout.offset(&o)];
-                        u += phi * vi;
-                        grad += g * vi;
-                    });
-                    (u, grad)
-                }
+            .map(|x| {
+                self.boundary
+                    .interpolate::<Dim<2>>(&self.layout, x, values)
+                    .map(|(u, grad, _)| (u, grad))
+                    .unwrap_or(nan)
             })
             .collect();
         let u = PyArray1::from_iter(py, out.iter().map(|o| o.0));

@@ -282,10 +282,8 @@ impl PySimulation {
     fn boundary_points<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         guard(|| {
             with_sim!(&self.engine, s, core => {
-                let xs: Vec<_> = match &s.model.boundary {
-                    core::solver::Boundary::Augmented(g) => g.points.iter().map(|p| p.x).collect(),
-                    core::solver::Boundary::Naive(_) => Vec::new(),
-                };
+                use core::WallTreatment;
+                let xs: Vec<_> = s.model.boundary.boundary_points().iter().map(|p| p.x).collect();
                 vectors_to_array(py, &xs)
             })
         })

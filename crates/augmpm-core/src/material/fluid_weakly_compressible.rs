@@ -11,9 +11,9 @@ use serde::{Deserialize, Serialize};
 #[serde(rename_all = "lowercase")]
 pub enum DensityEstimate {
     /// From the particle's own volume change: ρ = ρ0 / J with J̇ = J tr(∇v), J kept in the
-    /// particle's `jp` (Hu et al. 2018's fluid) and smoothed over the grid each step (J-bar,
-    /// [`crate::transfer::smooth_volume_ratio`]). Smooth, so a column at rest is not rectified by
-    /// the p ≥ 0 clamp, and unbiased next to walls and free surfaces.
+    /// particle's `jp` (Hu et al. 2018's fluid) and smoothed over the grid each step (J-bar). Smooth,
+    /// so a column at rest is not rectified by the p ≥ 0 clamp, and unbiased next to walls and free
+    /// surfaces.
     #[schemars(
         description = "ρ = ρ0/J from the particle's own volume change, smoothed over the grid each step (J-bar)"
     )]

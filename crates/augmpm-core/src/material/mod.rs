@@ -54,8 +54,8 @@ pub trait ConstitutiveModel<const D: usize> {
         false
     }
 
-    /// Whether the model keeps its density in `jp` = J, smoothed over the grid each step
-    /// ([`crate::transfer::smooth_volume_ratio`]).
+    /// Whether the model keeps its density in `jp` = J, smoothed over the grid each step (J-bar: the
+    /// step scatters V⁰ and V⁰J to the nodes and gathers their ratio back).
     fn smooths_volume_ratio(&self) -> bool {
         false
     }

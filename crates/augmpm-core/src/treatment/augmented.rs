@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 pub enum AugmentedTransfer {
     /// Energy-stable: P2G with the particle's normalised B-spline weights `w / Σw` (the transpose
     /// of the G2P fit), G2P fitted to the wall value at the particle's foot on each wall in reach
-    /// ([`crate::wall_fit`]); no velocity clamp, no mass floor.
+    /// ([`crate::treatment::wall_fit`]); no velocity clamp, no mass floor.
     #[schemars(description = "energy-stable: the transfers are each other's transpose and G2P meets the wall \
                               condition at the particle's foot on each wall (docs/stable_transfer.md)")]
     #[default]

@@ -1,13 +1,10 @@
 //! The naive wall treatment: grid nodes on the wall side of the material region take the wall's
-//! condition ([`crate::wall::WallCondition`]). The other treatment, the augmented grid of Toyota &
-//! Umetani 2024, is [`crate::augmented`]; [`Method`] chooses between them.
+//! condition ([`crate::wall::WallCondition`]), the classic MLS-MPM boundary and the paper's baseline.
 
 use crate::geometry::Region;
 use crate::grid::GridLayout;
 use crate::math::{Real, Vector};
 use crate::wall::WallCondition;
-use schemars::JsonSchema;
-use serde::{Deserialize, Serialize};
 
 /// A grid node on the wall side of the region, with the condition it gets.
 #[derive(Clone, Copy, Debug)]
@@ -65,15 +62,4 @@ impl<const D: usize> NaiveBoundary<D> {
             }
         }
     }
-}
-
-/// How walls act on the grid, chosen by name (`method` in scenes, the API and the CLI).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
-#[serde(rename_all = "lowercase")]
-pub enum Method {
-    /// Grid-node projection on the regular grid (the baseline of the paper).
-    Naive,
-    /// Augmented grid points on the walls (Toyota & Umetani 2024): the default.
-    #[default]
-    Augmented,
 }

@@ -1,36 +1,18 @@
-//! The model (what does not change during a run), the simulation state and
-//! the time step, which only calls the stages of [`crate::transfer`] in order.
+//! A simulation: the model (what does not change during a run), the state (everything that evolves;
+//! a checkpoint) and the scratch of a step; the step itself, which calls the stages of
+//! [`crate::step`] and the wall treatment ([`crate::treatment`]) in order.
 
-use crate::augmented::{AugmentedGrid, WallParticles};
-use crate::boundary::NaiveBoundary;
 use crate::geometry::Region;
-use crate::grid::OutOfGrid;
-use crate::grid::{GridLayout, GridState};
+use crate::grid::{GridLayout, GridState, OutOfGrid};
 use crate::material::{ConstitutiveModel, Material};
 use crate::math::{Dim, DimOps, Real, Vector};
 use crate::parallel::Disjoint;
 use crate::particles::{Column, ColumnMut, Field, FieldKind, Particles};
-use crate::schedule::{Binning, Schedule};
-use crate::transfer::{self, GridDensity, Transfer};
+use crate::step::schedule::{Binning, Schedule};
+use crate::step::transfer::{self, G2pOutcome, GridDensity, Transfer};
+use crate::treatment::augmented::WallParticles;
+use crate::treatment::{Boundary, WallTreatment};
 use std::time::Instant;
-
-/// How the walls act on the grid: one of the two methods of [`crate::boundary::Method`].
-pub enum Boundary<const D: usize> {
-    /// Grid nodes on the wall side are projected after the grid update.
-    Naive(NaiveBoundary<D>),
-    /// Boundary points join the grid; particles solve their own MLS systems.
-    Augmented(AugmentedGrid<D>),
-}
-
-impl<const D: usize> Boundary<D> {
-    /// Grid points: regular nodes, plus boundary points on an augmented grid.
-    fn num_points(&self, layout: &GridLayout<D>) -> usize {
-        match self {
-            Boundary::Naive(_) => layout.num_nodes(),
-            Boundary::Augmented(g) => layout.num_nodes() + g.points.len(),
-        }
-    }
-}
 
 /// Everything fixed during a run: grid, materials, gravity, walls.
 pub struct Model<const D: usize> {
@@ -97,8 +79,13 @@ impl StepError {
     }
 }
 
-/// The likely cause of a failed step, from the time step against the materials' stable bound.
-fn likely_cause(dt: Real, stable_dt: Real) -> String {
+/// The likely cause of a failed step, from the time step against the materials' stable bound
+/// (computed only for a failing step).
+fn likely_cause<const D: usize>(model: &Model<D>) -> String
+where
+    Dim<D>: DimOps<D>,
+{
+    let (dt, stable_dt) = (model.dt, model.stable_dt());
     let cause = if dt > stable_dt {
         format!(
             "likely cause: time.dt = {dt:e} s exceeds the materials' stable step {stable_dt:e} s (stiffness or \
@@ -205,6 +192,16 @@ impl<const D: usize> State<D> {
         ]
     }
 
+    /// Ends step `step` of `dt` (s) in which the particles moved at most `cells` cell widths and
+    /// `held` were held at a wall.
+    fn advance_clock(&mut self, step: u64, dt: Real, cells: Real, held: u64) {
+        self.binning.drift += cells;
+        self.held_at_wall += held;
+        self.step = step;
+        self.time += dt;
+        self.max_cfl = cells;
+    }
+
     /// Bytes per particle of the state in D dimensions.
     pub fn bytes_per_particle() -> usize {
         Self::fields().map(|f| f.kind.bytes(D)).sum()
@@ -244,6 +241,87 @@ struct Scratch<const D: usize> {
     smooths: Vec<bool>,
     /// Particles whose MLS system sees a wall, with their inverses (augmented grid only).
     walls: WallParticles<D>,
+}
+
+impl<const D: usize> Scratch<D> {
+    /// Bins the particles at `x` again if due (`binning`, part of the state), and clears the grid
+    /// values the last step left: on the node blocks it touched, and at every boundary point.
+    fn prepare_grid(
+        &mut self,
+        layout: &GridLayout<D>,
+        x: &[Vector<D>],
+        binning: &mut Binning,
+    ) -> Result<(), OutOfGrid> {
+        let Self { schedule, grid, .. } = self;
+        schedule.prepare(layout, x, binning)?;
+        let nodes = layout.num_nodes();
+        {
+            let (mass, spline) =
+                (Disjoint::new(&mut grid.mass[..nodes]), Disjoint::new(&mut grid.spline_mass[..nodes]));
+            let momentum = Disjoint::new(&mut grid.momentum[..nodes]);
+            // SAFETY: node blocks do not overlap, and each is listed once.
+            schedule.for_each_node_of(layout, schedule.stale(), |i| unsafe {
+                mass.update(i, |m| *m = 0.0);
+                spline.update(i, |m| *m = 0.0);
+                momentum.update(i, |m| *m = Vector::<D>::zeros());
+            });
+        }
+        grid.mass[nodes..].fill(0.0);
+        grid.spline_mass[nodes..].fill(0.0);
+        grid.momentum[nodes..].fill(Vector::<D>::zeros());
+        Ok(())
+    }
+
+    /// The node sums of the fluids' density estimate, where a material needs them: rest volume and
+    /// rest volume·J of the particles whose J is smoothed, and the grid mass of the `grid` estimate.
+    fn scatter_density(&mut self, layout: &GridLayout<D>, particles: &Particles<D>) {
+        let Self { schedule, volume_ratio, density_mass, smooths, .. } = self;
+        if !volume_ratio.is_empty() {
+            schedule.clear(layout, schedule.stale(), volume_ratio, (0.0, 0.0));
+            let material = &particles.material;
+            transfer::scatter_volume_ratio(
+                layout,
+                schedule,
+                &particles.x,
+                &particles.vol0,
+                &particles.jp,
+                |p| smooths[material[p] as usize],
+                volume_ratio,
+            );
+        }
+        if !density_mass.is_empty() {
+            schedule.clear(layout, schedule.stale(), density_mass, 0.0);
+            transfer::scatter_mass(layout, schedule, &particles.x, &particles.mass, density_mass);
+        }
+    }
+}
+
+/// Adds the time since the last lap to a stage's total.
+struct Lap(Instant);
+
+impl Lap {
+    fn start() -> Self {
+        Self(Instant::now())
+    }
+
+    fn add_to(&mut self, total: &mut f64) {
+        let now = Instant::now();
+        *total += (now - self.0).as_secs_f64();
+        self.0 = now;
+    }
+}
+
+/// The error of step `step` if its G2P found a non-finite particle, one whose stencil left the grid,
+/// or a move of more than [`MAX_CELLS_PER_STEP`] cells (`cells`), with its likely `cause`.
+fn failure(step: u64, outcome: &G2pOutcome, cells: Real, cause: impl FnOnce() -> String) -> Option<StepError> {
+    match (outcome.non_finite, outcome.left_grid) {
+        (Some(particle), _) => Some(StepError::NonFinite { step, particle, cause: cause() }),
+        (None, Some(particle)) => Some(StepError::LeftGrid { step, particle, cause: cause() }),
+        (None, None) if cells > MAX_CELLS_PER_STEP => {
+            Some(StepError::Unstable { step, particle: outcome.fastest, cells, cause: cause() })
+        }
+        (None, None) => None,
+    }
 }
 
 /// Wall-clock time spent in each stage since the simulation was created (s).
@@ -367,10 +445,7 @@ where
     pub fn memory_use(&self) -> MemoryUse {
         use crate::math::heap_bytes as b;
         let s = &self.scratch;
-        let boundary = match &self.model.boundary {
-            Boundary::Naive(w) => w.heap_bytes(),
-            Boundary::Augmented(g) => g.heap_bytes(),
-        };
+        let boundary = self.model.boundary.heap_bytes();
         MemoryUse {
             particles: self.state.heap_bytes(),
             particle_scratch: s.schedule.particle_bytes() + s.walls.heap_bytes(),
@@ -456,106 +531,55 @@ where
         Ok(())
     }
 
+    /// One step, the stages in order (the timing of each goes to `times`).
     fn step_here(&mut self) -> Result<(), StepError> {
-        let step = self.state.step + 1;
         let Self { model, state, scratch, times, .. } = self;
-        let State { particles, density, binning, .. } = state;
-        // Only a failing step pays for the stable-dt bound the message quotes.
-        let cause = || likely_cause(model.dt, model.stable_dt());
-        let left = |OutOfGrid(particle)| StepError::LeftGrid { step, particle, cause: cause() };
-        let layout = &model.layout;
-        let dt = model.dt;
-        let mut clock = Instant::now();
-        let mut lap = |slot: &mut f64| {
-            let now = Instant::now();
-            *slot += (now - clock).as_secs_f64();
-            clock = now;
-        };
+        let step = state.step + 1;
+        let (layout, dt) = (&model.layout, model.dt);
+        let left = |OutOfGrid(particle)| StepError::LeftGrid { step, particle, cause: likely_cause(model) };
+        let mut lap = Lap::start();
 
-        let Scratch { schedule, grid, density_mass, volume_ratio, smooths, walls } = scratch;
-        schedule.prepare(layout, &particles.x, binning).map_err(left)?;
-        let nodes = layout.num_nodes();
-        {
-            let (mass, spline) =
-                (Disjoint::new(&mut grid.mass[..nodes]), Disjoint::new(&mut grid.spline_mass[..nodes]));
-            let momentum = Disjoint::new(&mut grid.momentum[..nodes]);
-            // SAFETY: node blocks do not overlap, and each is listed once.
-            schedule.for_each_node_of(layout, schedule.stale(), |i| unsafe {
-                mass.update(i, |m| *m = 0.0);
-                spline.update(i, |m| *m = 0.0);
-                momentum.update(i, |m| *m = Vector::<D>::zeros());
-            });
-        }
-        grid.mass[nodes..].fill(0.0);
-        grid.spline_mass[nodes..].fill(0.0);
-        grid.momentum[nodes..].fill(Vector::<D>::zeros());
-        lap(&mut times.sort);
+        // 1. Bin the particles again if due; clear the grid where the last step left values.
+        scratch.prepare_grid(layout, &state.particles.x, &mut state.binning).map_err(left)?;
+        lap.add_to(&mut times.sort);
+        // 2. The node sums of the fluids' density estimate.
+        scratch.scatter_density(layout, &state.particles);
+        lap.add_to(&mut times.density);
+        // 3. The walls prepare for this step (augmented: the MLS systems of eq. (5) near walls).
+        state.ill_conditioned +=
+            model.boundary.prepare::<Dim<D>>(layout, &state.particles.x, &mut scratch.walls).map_err(left)?;
+        lap.add_to(&mut times.boundary);
 
-        if !volume_ratio.is_empty() {
-            schedule.clear(layout, schedule.stale(), volume_ratio, (0.0, 0.0));
-            let material = &particles.material;
-            transfer::scatter_volume_ratio(
-                layout,
-                schedule,
-                &particles.x,
-                &particles.vol0,
-                &particles.jp,
-                |p| smooths[material[p] as usize],
-                volume_ratio,
-            );
-        }
-        if !density_mass.is_empty() {
-            schedule.clear(layout, schedule.stale(), density_mass, 0.0);
-            transfer::scatter_mass(layout, schedule, &particles.x, &particles.mass, density_mass);
-        }
+        let Scratch { schedule, grid, density_mass, volume_ratio, walls, .. } = scratch;
+        let t = Transfer { layout, schedule, augmented: model.boundary.transfer_view(walls) };
         let grid_density = (!density_mass.is_empty() || !volume_ratio.is_empty()).then(|| GridDensity {
             grid_mass: density_mass,
             wall_fraction: model.wall_fraction.as_deref(),
             volume_ratio,
         });
-        lap(&mut times.density);
-
-        let augmented = match &model.boundary {
-            Boundary::Naive(_) => None,
-            Boundary::Augmented(g) => {
-                // eq. (5), once per particle near a wall and step, reused by P2G, the force and G2P.
-                state.ill_conditioned += walls.update::<Dim<D>>(g, layout, &particles.x).map_err(left)?;
-                Some((g, &*walls))
-            }
-        };
-        lap(&mut times.boundary);
-
-        let t = Transfer { layout, schedule, augmented };
-        transfer::p2g(&t, &model.materials, particles, grid_density, density, dt, grid);
-        lap(&mut times.p2g);
-
+        // 4. P2G: mass, momentum and the stress force.
+        transfer::p2g(&t, &model.materials, &state.particles, grid_density, &mut state.density, dt, grid);
+        lap.add_to(&mut times.p2g);
+        // 5. Grid update (momentum → velocity, gravity), then the walls' conditions.
         state.low_mass_nodes += transfer::grid_velocity(&t, grid, &model.gravity, dt) as u64;
-        match &model.boundary {
-            Boundary::Naive(w) => w.apply(&grid.mass, &mut grid.momentum),
-            Boundary::Augmented(g) => g.apply(&grid.mass, &mut grid.momentum),
-        }
-        lap(&mut times.grid);
+        model.boundary.apply(&grid.mass, &mut grid.momentum);
+        lap.add_to(&mut times.grid);
+        // 6. G2P, advection and the deformation update (only materials that smooth their J read
+        // it back from the density).
+        let smoothed: &[Real] = if volume_ratio.is_empty() { &[] } else { &state.density };
+        let outcome = transfer::g2p(
+            &t,
+            model.region.as_ref(),
+            &model.materials,
+            &grid.momentum,
+            smoothed,
+            &mut state.particles,
+            dt,
+        );
+        lap.add_to(&mut times.g2p);
 
-        // Only materials that smooth their J read it back from the density.
-        let smoothed: &[Real] = if volume_ratio.is_empty() { &[] } else { density };
-        let outcome =
-            transfer::g2p(&t, model.region.as_ref(), &model.materials, &grid.momentum, smoothed, particles, dt);
-        let cells = outcome.max_move / layout.h;
-        binning.drift += cells;
-        lap(&mut times.g2p);
-        state.held_at_wall += outcome.held_at_wall as u64;
-        state.step = step;
-        state.time += dt;
-        state.max_cfl = cells;
-        let error = match (outcome.non_finite, outcome.left_grid) {
-            (Some(particle), _) => Some(StepError::NonFinite { step, particle, cause: cause() }),
-            (None, Some(particle)) => Some(StepError::LeftGrid { step, particle, cause: cause() }),
-            (None, None) if cells > MAX_CELLS_PER_STEP => {
-                Some(StepError::Unstable { step, particle: outcome.fastest, cells, cause: cause() })
-            }
-            (None, None) => None,
-        };
-        match error {
+        state.advance_clock(step, dt, outcome.max_move / layout.h, outcome.held_at_wall as u64);
+        match failure(step, &outcome, state.max_cfl, || likely_cause(model)) {
             Some(e) => {
                 // A later call must not trust the binning of a state that went bad.
                 state.binning.drift = Real::INFINITY;

@@ -6,7 +6,6 @@
 //! Particle→grid stages scatter through a [`Schedule`] (coloured blocks, no atomics,
 //! bitwise reproducible for any thread count); grid→particle stages are per particle.
 
-use crate::augmented::{AugmentedGrid, AugmentedTransfer, WallEntry, WallParticles};
 use crate::geometry::Region;
 use crate::grid::{GridLayout, GridState};
 use crate::kernel::Stencil;
@@ -14,7 +13,8 @@ use crate::material::{ConstitutiveModel, Material, MaterialPoint};
 use crate::math::{Dim, DimOps, Matrix, Real, Vector};
 use crate::parallel::{Disjoint, MIN_BLOCKS, MIN_TASK};
 use crate::particles::Particles;
-use crate::schedule::{stencil_in_grid, Schedule};
+use crate::step::schedule::{stencil_in_grid, Schedule};
+use crate::treatment::augmented::{AugmentedGrid, AugmentedTransfer, WallEntry, WallParticles};
 use rayon::prelude::*;
 
 /// Scatters particle masses to the regular grid with the B-spline weights (never an augmented
@@ -459,7 +459,7 @@ impl G2pSum {
 }
 
 /// Grid→particle transfer `v_p = Σ φ v_i`, `C_p = Σ v_i gᵀ` (eq. (4)), then, per particle near
-/// a wall of an augmented grid, the fit to the wall value ([`crate::wall_fit`], `transfer =
+/// a wall of an augmented grid, the fit to the wall value ([`crate::treatment::wall_fit`], `transfer =
 /// "stable"`) or the hold of particles past a wall ([`hold_at_wall`], `"paper"`), advection
 /// `x += dt v`, and the deformation update of its material (from the smoothed J of P2G, read back
 /// from `density`, for materials that smooth it; `density` may be empty when none does).
@@ -521,7 +521,15 @@ where
                             if !feet.is_empty() && !g.surely_inside(layout, xp) && region.distance(xp).distance >= 0.0 {
                                 feet.pin_past(xp);
                             }
-                            crate::wall_fit::fit_to_walls(minv, xp, &feet, &g.walls, (h, dt), &mut vn, &mut cn);
+                            crate::treatment::wall_fit::fit_to_walls(
+                                minv,
+                                xp,
+                                &feet,
+                                &g.walls,
+                                (h, dt),
+                                &mut vn,
+                                &mut cn,
+                            );
                         }
                     }
                 }
@@ -582,7 +590,7 @@ mod tests {
     use super::*;
     use crate::geometry::{Point, Polygon, WallShape, Walls2};
     use crate::material::WeaklyCompressibleFluid;
-    use crate::schedule::Binning;
+    use crate::step::schedule::Binning;
     use nalgebra::{Matrix2, Vector2};
 
     fn random_particles(n: usize) -> Particles<2> {
