@@ -127,3 +127,16 @@ def test_spin_down_series_starts_at_one_and_decays_as_its_first_mode():
     first = 8 / a1**2 * np.exp(-(a1**2) * rotation.NU * t / rotation.RADIUS**2)
     assert abs(rotation.spin_down(t) - first) < 1e-9
     assert np.allclose(rotation.bessel_j1_zeros(8)[5:], [19.6158585105, 22.7600843806, 25.9036720876], atol=1e-6)
+
+
+def test_block_on_a_rough_incline(quick_report):
+    """A block on a 30° incline with Coulomb friction μ: where tanθ > μ (μ = 0.2, 0.4) it accelerates at
+    g(sinθ − μ cosθ) within 2%; where tanθ < μ (μ = 0.6, tan 30° = 0.577) it stays where it landed (≤ 0.1 cell
+    in the second after landing). Both methods; no particle past the wall."""
+    _, _, records = quick_report
+    for method in ("naive", "augmented"):
+        for mu in (0.2, 0.4):
+            assert _value(records, f"incline_friction_mu{mu:g}", method, "acceleration_rel_error", 30.0) < 0.02
+        assert _value(records, "incline_friction_mu0.6", method, "creep_cells_per_s", 30.0) <= 0.1
+        for mu in (0.2, 0.4, 0.6):
+            assert _value(records, f"incline_friction_mu{mu:g}", method, "particles_outside_max", 30.0) == 0

@@ -35,10 +35,20 @@ def _number(x: Any) -> str:
     return "∞" if x is None else (str(int(x)) if isinstance(x, float) and x.is_integer() else str(x))
 
 
+def _infinite(schema: dict[str, Any]) -> dict[str, Any] | None:
+    """The number option of a key that also takes "inf", or None."""
+    options = schema.get("anyOf", [])
+    if any(o.get("const") == "inf" for o in options):
+        return next(o for o in options if o.get("type") == "number")
+    return None
+
+
 def _range(schema: dict[str, Any]) -> str:
     schema = _resolve(schema)
     if (options := _choices(schema)) is not None:
         return ", ".join(f"`{o['const']}`" for o in options)
+    if (number := _infinite(schema)) is not None:
+        return _range(number).replace("∞)", "∞]")
     target = schema
     prefix = ""
     while target.get("type") in ("array", ["array", "null"]) and "items" in target:
@@ -58,6 +68,8 @@ def _type(schema: dict[str, Any]) -> str:
     schema = _resolve(schema)
     if _choices(schema) is not None:
         return "name"
+    if _infinite(schema) is not None:
+        return 'number or `"inf"`'
     if "anyOf" in schema:
         return _type(next(o for o in schema["anyOf"] if o.get("type") != "null"))
     kinds = schema.get("type")
@@ -122,6 +134,8 @@ def _tables(path: str, schema: dict[str, Any], out: list[list[str]]) -> None:
 
 def _nested(path: str, properties: dict[str, Any], out: list[list[str]]) -> None:
     for key, prop in properties.items():
+        if "anyOf" in prop:  # an optional table: its table
+            prop = next(o for o in prop["anyOf"] if o.get("type") != "null")
         # A table's own doc, not the doc of the key that holds it.
         prop = _DEFS[prop["$ref"].rsplit("/", 1)[-1]] if "$ref" in prop else prop
         child = f"{path}.{key}" if path else key

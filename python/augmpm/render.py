@@ -75,7 +75,11 @@ def _draw_background(scene: Scene, size_px: int) -> tuple[np.ndarray, np.ndarray
     wall_style = {"facecolor": "0.85", "edgecolor": "0.2", "linewidth": 1.5}
     ax.add_patch(Rectangle((0, 0), lx, ly, fill=False, edgecolor="0.2", linewidth=2))
     for w in scene.walls:
-        if isinstance(w, PolygonWall):
+        if w.motion is not None:
+            continue  # a moving wall is drawn on each frame, where it is then
+        if isinstance(w, PolygonWall) and w.side == "outside":
+            ax.add_patch(Polygon(np.array(w.vertices), closed=True, **wall_style))
+        elif isinstance(w, PolygonWall):
             # Shade the wall side: the box minus the polygon, drawn as a hole.
             outline = np.array(w.vertices)
             ax.add_patch(Polygon(outline, closed=True, fill=False, edgecolor="0.2", linewidth=1.5))
@@ -183,6 +187,8 @@ class FrameRenderer:
         self, scene: Scene, title: str = "", size_px: int = 640, animation: Path | None = None, fps: int = 20
     ) -> None:
         self.background, self._scale, self._offset = _draw_background(scene, size_px)
+        # Which moving walls are obstacles (material outside them): drawn filled, as the still ones.
+        self._filled = [w.side == "outside" for w in scene.walls if w.motion is not None]
         self.title = title
         lx, ly = scene.grid.domain
         # The caption's top-left corner at (0.01 lx, 0.99 ly), as before; 14 px is 10 pt at 100 dpi.
@@ -213,10 +219,16 @@ class FrameRenderer:
         """The frame as an RGB array (H, W, 3): background, particles at ``x`` (N, 2) in m by body, caption."""
         return self._compose(x, body, time)[0]
 
-    def _compose(self, x: np.ndarray, body: np.ndarray, time: float) -> tuple[np.ndarray, np.ndarray]:
+    def _compose(
+        self, x: np.ndarray, body: np.ndarray, time: float, walls: list[np.ndarray] | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The frame, and which bands of ``_BandPng.BAND`` rows it changed from the background."""
         img = self.background.copy()
         h, w = img.shape[:2]
+        changed = np.zeros(-(-h // _BandPng.BAND), dtype=bool)
+        if walls:
+            top, bottom = self._outlines(img, walls)
+            changed[top // _BandPng.BAND : -(-bottom // _BandPng.BAND)] = True
         x = np.asarray(x, dtype=float).reshape(-1, 2)
         finite = np.isfinite(x).all(axis=1)
         p = self.to_pixel(x[finite])
@@ -230,11 +242,25 @@ class FrameRenderer:
         rows, cols = rows[inside], cols[inside]
         colours = COLOURS[np.asarray(body)[finite] % len(COLOURS)]
         img.reshape(-1, 3)[rows * w + cols] = colours[i[inside]]
-        changed = np.zeros(-(-h // _BandPng.BAND), dtype=bool)
         changed[rows // _BandPng.BAND] = True
         top, bottom = self._caption(img, f"{self.title}  t = {time:.4f} s".strip())
         changed[top // _BandPng.BAND : -(-bottom // _BandPng.BAND)] = True
         return img, changed
+
+    def _outlines(self, img: np.ndarray, walls: list[np.ndarray]) -> tuple[int, int]:
+        """Draws each closed outline (world coordinates, m) in dark grey, 2 px wide; returns the rows it
+        may have changed, [top, bottom)."""
+        canvas = Image.fromarray(img)
+        pen = ImageDraw.Draw(canvas)
+        top, bottom = img.shape[0], 0
+        for k, outline in enumerate(walls):
+            p = self.to_pixel(outline)
+            if k < len(self._filled) and self._filled[k]:
+                pen.polygon([tuple(q) for q in p], fill=(217, 217, 217))
+            pen.line([tuple(q) for q in np.vstack([p, p[:1]])], fill=(51, 51, 51), width=2)
+            top, bottom = min(top, int(p[:, 1].min()) - 2), max(bottom, int(p[:, 1].max()) + 3)
+        img[...] = np.asarray(canvas)
+        return max(top, 0), min(max(bottom, 0), img.shape[0])
 
     def _caption(self, img: np.ndarray, text: str) -> tuple[int, int]:
         """Writes ``text`` in black at the top left; returns the rows it may have changed, [top, bottom)."""
@@ -249,21 +275,25 @@ class FrameRenderer:
         region[...] = (region * (255 - alpha) // 255).astype(np.uint8)
         return r0, r0 + region.shape[0]
 
-    def draw(self, x: np.ndarray, body: np.ndarray, time: float, path: Path) -> Future:
-        """Draws particles ``x`` (N, 2) in m at ``time`` (s) into the PNG at ``path`` and the animation.
+    def draw(
+        self, x: np.ndarray, body: np.ndarray, time: float, path: Path, walls: list[np.ndarray] | None = None
+    ) -> Future:
+        """Draws particles ``x`` (N, 2) in m at ``time`` (s) into the PNG at ``path`` and the animation,
+        with the outlines ``walls`` ((M, 2) arrays in m: the moving walls where they are then).
 
         Returns once the frame is queued, with the future of its writing; the arrays are copied,
         so the caller may reuse them.
         """
-        frame = (np.array(x, dtype=float), np.array(body), float(time), Path(path))
+        outlines = [np.array(w, dtype=float) for w in walls or []]
+        frame = (np.array(x, dtype=float), np.array(body), float(time), Path(path), outlines)
         future = self._pool.submit(self._write, *frame)
         self._pending.append(future)
         while len(self._pending) > _MAX_PENDING:
             self._pending.popleft().result()
         return future
 
-    def _write(self, x: np.ndarray, body: np.ndarray, time: float, path: Path) -> None:
-        img, changed = self._compose(x, body, time)
+    def _write(self, x: np.ndarray, body: np.ndarray, time: float, path: Path, walls: list[np.ndarray]) -> None:
+        img, changed = self._compose(x, body, time, walls)
         write_bytes(path, self._png.encode(img, changed))
         if self._animation is not None:
             self._animation.append_data(img)

@@ -250,7 +250,8 @@ class _Run:
         write_pvd(out / "particles.pvd", self.vtk_frames)
         png = None
         if self.renderer is not None:
-            png = self.renderer.draw(x, body, sim.time, out / "frames" / f"{name}.png")
+            moving = [outline for outline, moves in sim.wall_outlines() if moves]
+            png = self.renderer.draw(x, body, sim.time, out / "frames" / f"{name}.png", walls=moving)
         m = sim.metrics()
         self.pending.append(({k: m[k] for k in METRIC_COLUMNS}, png))
         checkpoint = self.every and self.frame % self.every == 0

@@ -19,7 +19,7 @@ from typing import Annotated, Any, Literal
 
 import pydantic
 import tomli_w
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PlainSerializer, ValidationError, model_validator
 from pydantic_core import PydanticCustomError
 
 from augmpm import _core
@@ -152,13 +152,42 @@ def _bounds(schema: dict[str, Any]) -> dict[str, Any]:
     return {arg: schema[key] for key, arg in names.items() if key in schema}
 
 
+def _number_or_infinity(number: dict[str, Any]) -> Any:
+    """A number in the bounds of `number`, or infinity: written "inf" in JSON (which has no infinity)
+    and in files, where TOML's own `inf` is read too. In Python it is a float (`math.inf`)."""
+
+    def read(value: Any) -> Any:
+        if isinstance(value, str) and value.lower() == "inf":
+            return math.inf
+        if isinstance(value, str | bool) or (isinstance(value, float) and math.isnan(value)):
+            raise PydanticCustomError("type", 'Input should be a number or "inf"')
+        return value
+
+    def write(value: float) -> Any:
+        return "inf" if value == math.inf else value
+
+    return Annotated[
+        float,
+        Field(allow_inf_nan=True, **_bounds(number)),
+        BeforeValidator(read),
+        PlainSerializer(write, when_used="json"),
+    ]
+
+
 def _annotation(schema: dict[str, Any], hint: str) -> Any:
     """The pydantic type of a key's schema (its doc, default and unit go to its Field)."""
     if (found := _def_of(schema)) is not None:
         return _annotation(found[1], found[0])
-    if "anyOf" in schema:  # an optional choice
-        other = next(o for o in schema["anyOf"] if o.get("type") != "null")
-        return _annotation(other, hint) | None
+    if "anyOf" in schema:  # any one of the options (an optional key: its type or null)
+        options = [o for o in schema["anyOf"] if o.get("type") != "null"]
+        if any(o.get("const") == "inf" for o in options):
+            number = next(o for o in options if o.get("type") == "number")
+            t = _number_or_infinity(number)
+        else:
+            t = _annotation(options[0], hint)
+            for option in options[1:]:
+                t = t | _annotation(option, hint)
+        return t | None if len(options) < len(schema["anyOf"]) else t
     if "oneOf" in schema:
         options = schema["oneOf"]
         if all("const" in o for o in options):

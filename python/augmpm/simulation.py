@@ -152,6 +152,11 @@ class Simulation:
         """Boundary grid points (m), shape (B, 2); empty for the naive method."""
         return self._sim.boundary_points
 
+    def wall_outlines(self) -> list[tuple[np.ndarray, bool]]:
+        """Each scene wall where it is now (a moving wall follows its ``motion``) as the (M, 2) vertices (m)
+        of its closed outline (a circle as 64 points), and whether it moves."""
+        return self._sim.wall_outlines()
+
     def wall_distance(self, points: np.ndarray) -> np.ndarray:
         """Signed distance (m) of points (M, 2) to the walls, positive outside the material region."""
         try:

@@ -4,6 +4,7 @@
 //! normals point from the material into the wall.
 
 use crate::math::{Real, Vector};
+use crate::motion::{Motion, Pose};
 use crate::wall::BoundaryPoint;
 use nalgebra::Vector2;
 
@@ -113,6 +114,36 @@ pub trait Region<const D: usize>: Send + Sync {
     /// left the region), and on each circle. A region without walls has none.
     fn wall_feet(&self, _x: &Vector<D>, _reach: Real) -> WallFeet<D> {
         WallFeet::default()
+    }
+
+    /// Whether any wall moves.
+    fn moves(&self) -> bool {
+        false
+    }
+
+    /// Puts the moving walls where they are at time `t` (s), moving at their velocities over the
+    /// step `dt` (s) that starts there. Still walls stay.
+    fn set_time(&mut self, _t: Real, _dt: Real) {}
+
+    /// Velocity (m/s) of wall `wall`'s surface near `x`, where its outward normal is `n`.
+    fn surface_velocity(&self, _wall: usize, _x: &Vector<D>, _n: &Vector<D>) -> Vector<D> {
+        Vector::<D>::zeros()
+    }
+
+    /// Points sampled along the walls at most `spacing` (m) apart, each with its wall's velocity there:
+    /// the boundary points of an augmented grid. A region that does not sample its walls has none.
+    fn boundary_points(&self, _spacing: Real) -> Vec<BoundaryPoint<D>> {
+        Vec::new()
+    }
+
+    /// Each wall where it is now, as a closed outline (its vertices; a circle as 64 points), for drawing.
+    fn outlines(&self) -> Vec<Vec<Vector<D>>> {
+        Vec::new()
+    }
+
+    /// Whether wall `wall` moves.
+    fn is_moving(&self, _wall: usize) -> bool {
+        false
     }
 }
 
@@ -290,8 +321,10 @@ impl SurfaceMotion {
 /// Geometry of one wall.
 #[derive(Clone, Debug, PartialEq)]
 pub enum WallShape {
-    /// Material inside the (counter-clockwise) polygon.
+    /// Material inside the (counter-clockwise) polygon: a container.
     Polygon(Polygon),
+    /// Material outside the (counter-clockwise) polygon: an obstacle.
+    Obstacle(Polygon),
     /// A circle, material on the given side.
     Circle(Circle, Side),
 }
@@ -301,10 +334,18 @@ pub enum WallShape {
 /// Wall `i < walls.len()` is a scene wall; index `walls.len()` is the domain box.
 #[derive(Clone, Debug)]
 pub struct Walls2 {
+    /// Each wall where it is now.
     pub walls: Vec<WallShape>,
     domain_box: Polygon,
     /// How each wall's surface moves, the domain box last (still).
     motions: Vec<SurfaceMotion>,
+    /// Each wall as the scene draws it, and how it moves (`None`: still).
+    drawn: Vec<WallShape>,
+    moves: Vec<Option<Motion>>,
+    /// Each moving wall's pose now and at the end of the step, and the step (s).
+    now: Vec<Pose>,
+    next: Vec<Pose>,
+    dt: Real,
 }
 
 impl Walls2 {
@@ -317,7 +358,40 @@ impl Walls2 {
             Point::new(0.0, extent.y),
         ]);
         let motions = vec![SurfaceMotion::STILL; walls.len() + 1];
-        Self { walls, domain_box, motions }
+        let still: Vec<Pose> = walls.iter().map(|w| Pose::still(w.centre())).collect();
+        let moves = vec![None; walls.len()];
+        Self { drawn: walls.clone(), walls, domain_box, motions, moves, now: still.clone(), next: still, dt: 0.0 }
+    }
+
+    /// The same walls, wall `i` moving as `moves[i]` says (`None`: still), placed at time 0.
+    pub fn with_moves(mut self, moves: Vec<Option<Motion>>) -> Self {
+        assert_eq!(moves.len(), self.walls.len(), "one motion per wall");
+        self.moves = moves;
+        self.set_time(0.0, 0.0);
+        self
+    }
+
+    /// Whether wall `wall` moves.
+    pub fn is_moving(&self, wall: usize) -> bool {
+        self.moves.get(wall).is_some_and(Option::is_some)
+    }
+
+    /// The pose of wall `wall` now.
+    pub fn pose(&self, wall: usize) -> Pose {
+        self.now[wall]
+    }
+
+    /// The fastest moving wall and the largest speed (m/s) of any of its points, if a wall moves.
+    pub fn fastest(&self) -> Option<(usize, Real)> {
+        self.moves
+            .iter()
+            .enumerate()
+            .filter_map(|(i, m)| {
+                let m = m.as_ref()?;
+                let pivot = m.pose(0.0, self.drawn[i].centre()).pivot;
+                Some((i, m.top_speed(self.drawn[i].reach_from(&pivot))))
+            })
+            .max_by(|a, b| a.1.total_cmp(&b.1))
     }
 
     /// The same walls with their surfaces moving as `motions` (one per wall; the box stays still).
@@ -328,9 +402,16 @@ impl Walls2 {
         self
     }
 
-    /// Velocity (m/s) of wall `wall`'s surface near `x`, where its outward normal is `n`.
-    pub fn surface_velocity(&self, wall: usize, x: &Point, n: &Point) -> Point {
-        self.motions[wall].at(x, n)
+    /// Velocity (m/s) of wall `wall`'s surface near `x`, where its outward normal is `n`: a moving
+    /// wall's own velocity there (its displacement over the step, divided by the step) plus the motion
+    /// of its surface along it.
+    fn velocity_at(&self, wall: usize, x: &Point, n: &Point) -> Point {
+        let surface = self.motions[wall].at(x, n);
+        if !self.is_moving(wall) || self.dt == 0.0 {
+            return surface;
+        }
+        let carried = (self.next[wall].place(&self.now[wall].unplace(x)) - x) / self.dt;
+        carried + surface
     }
 
     /// Index of the domain box among the walls.
@@ -339,30 +420,72 @@ impl Walls2 {
     }
 }
 
+impl WallShape {
+    /// The centre a wall turns about unless its motion names a pivot: a circle's centre, a polygon's
+    /// vertex mean.
+    pub fn centre(&self) -> Point {
+        match self {
+            WallShape::Polygon(p) | WallShape::Obstacle(p) => {
+                p.vertices.iter().sum::<Point>() / p.vertices.len() as Real
+            }
+            WallShape::Circle(c, _) => c.center,
+        }
+    }
+
+    /// The shape in `pose`.
+    fn placed(&self, pose: &Pose) -> Self {
+        match self {
+            WallShape::Polygon(p) => {
+                WallShape::Polygon(Polygon::new(p.vertices.iter().map(|v| pose.place(v)).collect()))
+            }
+            WallShape::Obstacle(p) => {
+                WallShape::Obstacle(Polygon::new(p.vertices.iter().map(|v| pose.place(v)).collect()))
+            }
+            WallShape::Circle(c, side) => {
+                WallShape::Circle(Circle { center: pose.place(&c.center), radius: c.radius }, *side)
+            }
+        }
+    }
+
+    /// The farthest distance (m) of the shape from `pivot`.
+    pub fn reach_from(&self, pivot: &Point) -> Real {
+        match self {
+            WallShape::Polygon(p) | WallShape::Obstacle(p) => {
+                p.vertices.iter().map(|v| (v - pivot).norm()).fold(0.0, Real::max)
+            }
+            WallShape::Circle(c, _) => (c.center - pivot).norm() + c.radius,
+        }
+    }
+}
+
 impl Walls2 {
-    /// The polygon walls with their indices, the domain box last.
-    fn polygons(&self) -> impl Iterator<Item = (usize, &Polygon)> {
+    /// The polygon walls with their indices and whether the material is outside them (an obstacle),
+    /// the domain box last.
+    fn polygons(&self) -> impl Iterator<Item = (usize, &Polygon, bool)> {
         self.walls
             .iter()
             .enumerate()
             .filter_map(|(i, w)| match w {
-                WallShape::Polygon(p) => Some((i, p)),
+                WallShape::Polygon(p) => Some((i, p, false)),
+                WallShape::Obstacle(p) => Some((i, p, true)),
                 WallShape::Circle(..) => None,
             })
-            .chain(std::iter::once((self.box_index(), &self.domain_box)))
+            .chain(std::iter::once((self.box_index(), &self.domain_box, false)))
     }
 
     /// Boundary grid points at spacing ≤ `h` (m) along every wall: polygon vertices (two
     /// normals) plus the points that split each edge into ⌈len/h⌉ equal parts, and
     /// ⌈2πr/h⌉ points around each circle. Only points on the boundary of the material
     /// region are kept (e.g. the domain box is dropped where a polygon lies inside it).
-    pub fn boundary_points(&self, h: Real) -> Vec<BoundaryPoint<2>> {
+    fn sample_points(&self, h: Real) -> Vec<BoundaryPoint<2>> {
         let mut out = Vec::new();
-        for (wall, poly) in self.polygons() {
+        for (wall, poly, obstacle) in self.polygons() {
             let n = poly.vertices.len();
+            // Into the wall: out of a container, into an obstacle.
+            let into = if obstacle { -1.0 } else { 1.0 };
             let normal = |i: usize| {
                 let e = poly.vertices[(i + 1) % n] - poly.vertices[i];
-                Point::new(e.y, -e.x).normalize()
+                Point::new(e.y, -e.x).normalize() * into
             };
             for i in 0..n {
                 let (a, b) = (poly.vertices[i], poly.vertices[(i + 1) % n]);
@@ -395,6 +518,55 @@ impl Walls2 {
 }
 
 impl Region<2> for Walls2 {
+    fn outlines(&self) -> Vec<Vec<Point>> {
+        self.walls
+            .iter()
+            .map(|w| match w {
+                WallShape::Polygon(p) | WallShape::Obstacle(p) => p.vertices.clone(),
+                WallShape::Circle(c, _) => (0..64)
+                    .map(|k| {
+                        let t = 2.0 * crate::math::PI * k as Real / 64.0;
+                        c.center + Point::new(t.cos(), t.sin()) * c.radius
+                    })
+                    .collect(),
+            })
+            .collect()
+    }
+
+    fn is_moving(&self, wall: usize) -> bool {
+        Walls2::is_moving(self, wall)
+    }
+
+    fn surface_velocity(&self, wall: usize, x: &Point, n: &Point) -> Point {
+        self.velocity_at(wall, x, n)
+    }
+
+    fn boundary_points(&self, spacing: Real) -> Vec<BoundaryPoint<2>> {
+        let mut points = self.sample_points(spacing);
+        for p in &mut points {
+            p.velocity = self.velocity_at(p.wall, &p.x, &p.normals[0]);
+        }
+        points
+    }
+
+    fn moves(&self) -> bool {
+        self.moves.iter().any(Option::is_some)
+    }
+
+    fn set_time(&mut self, t: Real, dt: Real) {
+        self.dt = dt;
+        for (i, motion) in self.moves.iter().enumerate() {
+            if let Some(motion) = motion {
+                let centre = self.drawn[i].centre();
+                (self.now[i], self.next[i]) = (motion.pose(t, centre), motion.pose(t + dt, centre));
+                self.walls[i] = self.drawn[i].placed(&self.now[i]);
+                if let WallShape::Circle(c, _) = &self.walls[i] {
+                    self.motions[i].center = Some(c.center);
+                }
+            }
+        }
+    }
+
     fn distance(&self, x: &Vector<2>) -> WallDistance<2> {
         // Intersection of constraints: the largest signed distance wins.
         let (d, n) = self.domain_box.signed_distance(x);
@@ -407,6 +579,12 @@ impl Region<2> for Walls2 {
                     let (d, n) = p.signed_distance(x);
                     if union.is_none_or(|u| d < u.distance) {
                         union = Some(WallDistance { distance: d, normal: n, wall: i });
+                    }
+                }
+                WallShape::Obstacle(p) => {
+                    let (d, n) = p.signed_distance(x);
+                    if -d > out.distance {
+                        out = WallDistance { distance: -d, normal: -n, wall: i };
                     }
                 }
                 WallShape::Circle(c, side) => {
@@ -434,12 +612,13 @@ impl Region<2> for Walls2 {
         let tolerance = Real::EPSILON.sqrt() * reach;
         let mut add = |q: Point, normal: Point, wall: usize, curvature: Real| {
             if self.distance(&q).distance.abs() <= tolerance {
-                let velocity = self.surface_velocity(wall, &q, &normal);
+                let velocity = self.velocity_at(wall, &q, &normal);
                 feet.push(WallFoot { x: q, normal, wall, velocity, curvature }, (x - q).norm(), tolerance);
             }
         };
-        for (wall, poly) in self.polygons() {
+        for (wall, poly, obstacle) in self.polygons() {
             let n = poly.vertices.len();
+            let into = if obstacle { -1.0 } else { 1.0 };
             // Where x's perpendicular lands on each edge, as a fraction of its length.
             let along = |k: usize| {
                 let (a, b) = (poly.vertices[k], poly.vertices[(k + 1) % n]);
@@ -452,7 +631,7 @@ impl Region<2> for Walls2 {
                 if t > 0.0 && t < 1.0 {
                     let q = a + e * t;
                     if (x - q).norm() < reach {
-                        add(q, Point::new(e.y, -e.x).normalize(), wall, 0.0);
+                        add(q, Point::new(e.y, -e.x).normalize() * into, wall, 0.0);
                     }
                 }
                 // x past the end of the edge before a and before the start of this one sees the
@@ -462,7 +641,9 @@ impl Region<2> for Walls2 {
                 let before = a - poly.vertices[(k + n - 1) % n];
                 let d = (a - x).norm();
                 if t <= 0.0 && along((k + n - 1) % n) >= 1.0 && d > 0.0 && d < reach {
-                    let normal = if before.perp(&e) < 0.0 { (a - x) / d } else { (x - a) / d };
+                    // Seen from the material, an obstacle's corners turn the other way.
+                    let reflex = (before.perp(&e) < 0.0) != obstacle;
+                    let normal = if reflex { (a - x) / d } else { (x - a) / d };
                     add(a, normal, wall, 0.0);
                 }
             }
@@ -643,5 +824,31 @@ mod tests {
         assert!((below.normal - Point::new(0.0, -1.0)).norm() < 1e-12);
         let outside_box = walls.distance(&Point::new(-0.1, 0.5));
         assert!(outside_box.distance > 0.0);
+    }
+
+    /// A square obstacle (material around it): positive distance inside it with the normal pointing
+    /// into it, boundary points on its edges with normals into it (two at each corner), and from a
+    /// particle off a corner, the corner as its foot with the normal towards it.
+    #[test]
+    fn a_polygon_obstacle_keeps_the_material_around_it() {
+        let block =
+            Polygon::new(vec![Point::new(0.4, 0.4), Point::new(0.6, 0.4), Point::new(0.6, 0.6), Point::new(0.4, 0.6)]);
+        let walls = Walls2::new(vec![WallShape::Obstacle(block)], Point::new(1.0, 1.0));
+        let inside = walls.distance(&Point::new(0.45, 0.5));
+        assert_eq!(inside.wall, 0);
+        assert!((inside.distance - 0.05).abs() < 1e-15 && (inside.normal - Point::new(1.0, 0.0)).norm() < 1e-12);
+        let around = walls.distance(&Point::new(0.35, 0.5));
+        assert!(around.distance < 0.0);
+        let points: Vec<_> = walls.boundary_points(0.05).into_iter().filter(|p| p.wall == 0).collect();
+        assert_eq!(points.len(), 16);
+        for p in &points {
+            // Into the obstacle: towards its centre.
+            assert!(p.normals.iter().all(|n| n.dot(&(Point::new(0.5, 0.5) - p.x)) > 0.0), "{p:?}");
+        }
+        let x = Point::new(0.38, 0.38);
+        let feet = walls.wall_feet(&x, 0.05);
+        let corner = feet.iter().find(|f| f.wall == 0).expect("the corner is a foot");
+        assert!((corner.x - Point::new(0.4, 0.4)).norm() < 1e-15);
+        assert!((corner.normal - (corner.x - x).normalize()).norm() < 1e-12);
     }
 }

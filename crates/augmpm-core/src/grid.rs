@@ -121,6 +121,13 @@ impl<const D: usize> GridState<D> {
         use crate::math::heap_bytes as b;
         b(&self.mass) + b(&self.spline_mass) + b(&self.momentum)
     }
+
+    /// `n` grid points (after moving walls changed the number of boundary points), new ones zero.
+    pub fn resize(&mut self, n: usize) {
+        self.mass.resize(n, 0.0);
+        self.spline_mass.resize(n, 0.0);
+        self.momentum.resize(n, Vector::<D>::zeros());
+    }
 }
 
 /// Particle index whose stencil left the grid.

@@ -18,6 +18,7 @@ pub mod grid;
 pub mod kernel;
 pub mod material;
 pub mod math;
+pub mod motion;
 pub mod parallel;
 pub mod particles;
 pub mod scene;

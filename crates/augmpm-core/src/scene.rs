@@ -5,12 +5,13 @@ use crate::geometry::{Circle, Point, Polygon, Region, Side, SurfaceMotion, WallS
 use crate::grid::GridLayout;
 use crate::material::Material;
 use crate::math::{Precision, Real};
+use crate::motion::Motion;
 use crate::particles::Particles;
 use crate::simulation::{Model, Simulation};
 use crate::treatment::augmented::{AugmentedGrid, AugmentedTransfer};
 use crate::treatment::naive::NaiveBoundary;
 use crate::treatment::{Boundary, Method};
-use crate::wall::WallCondition;
+use crate::wall::{WallCondition, WallContact};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use schemars::JsonSchema;
@@ -82,15 +83,23 @@ pub struct TimeSpec {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
 pub enum WallSpec {
-    /// A closed polygon, counter-clockwise, material inside (a container).
+    /// A closed polygon, counter-clockwise, material `inside` it (a container, the default) or `outside` it
+    /// (an obstacle).
     #[schemars(title = "PolygonWall")]
     Polygon {
         /// Corners, counter-clockwise; the first may be repeated at the end.
         #[schemars(length(min = 3), extend("unit" = "m", "unbounded" = true))]
         vertices: Vec<[Real; 2]>,
+        /// Where the material is: `inside` the polygon (a container) or `outside` (an obstacle).
+        #[serde(default = "inside")]
+        side: SideSpec,
         /// This wall's condition (default: the scene's `wall_condition`).
         #[serde(default)]
         condition: Option<WallCondition>,
+        /// Coulomb friction coefficient μ of a `separate` wall (default: the scene's `wall_friction`).
+        #[serde(default, with = "friction::optional")]
+        #[schemars(schema_with = "friction::optional_schema")]
+        friction: Option<Real>,
         /// Velocity of the wall's surface; only its part along the wall acts (the wall stays put).
         #[serde(default)]
         #[schemars(extend("unit" = "m/s", "unbounded" = true))]
@@ -99,6 +108,9 @@ pub enum WallSpec {
         #[serde(default)]
         #[schemars(extend("unit" = "m/s", "unbounded" = true))]
         tangential_speed: Real,
+        /// How the wall moves as a rigid body (default: it stays where the scene draws it).
+        #[serde(default)]
+        motion: Option<Motion>,
     },
     /// A circle, material `outside` it (an obstacle, the default) or `inside` it (a container).
     #[schemars(title = "CircleWall")]
@@ -115,6 +127,10 @@ pub enum WallSpec {
         /// This wall's condition (default: the scene's `wall_condition`).
         #[serde(default)]
         condition: Option<WallCondition>,
+        /// Coulomb friction coefficient μ of a `separate` wall (default: the scene's `wall_friction`).
+        #[serde(default, with = "friction::optional")]
+        #[schemars(schema_with = "friction::optional_schema")]
+        friction: Option<Real>,
         /// Velocity of the wall's surface; only its part along the wall acts (the wall stays put).
         #[serde(default)]
         #[schemars(extend("unit" = "m/s", "unbounded" = true))]
@@ -123,7 +139,33 @@ pub enum WallSpec {
         #[serde(default)]
         #[schemars(extend("unit" = "m/s", "unbounded" = true))]
         tangential_speed: Real,
+        /// How the wall moves as a rigid body (default: it stays where the scene draws it).
+        #[serde(default)]
+        motion: Option<Motion>,
     },
+}
+
+impl WallSpec {
+    /// The wall's own condition, if it names one.
+    pub fn condition(&self) -> Option<WallCondition> {
+        match self {
+            WallSpec::Polygon { condition, .. } | WallSpec::Circle { condition, .. } => *condition,
+        }
+    }
+
+    /// The wall's own friction coefficient, if it names one.
+    pub fn friction(&self) -> Option<Real> {
+        match self {
+            WallSpec::Polygon { friction, .. } | WallSpec::Circle { friction, .. } => *friction,
+        }
+    }
+
+    /// How the wall moves, if it does.
+    pub fn motion(&self) -> Option<&Motion> {
+        match self {
+            WallSpec::Polygon { motion, .. } | WallSpec::Circle { motion, .. } => motion.as_ref(),
+        }
+    }
 }
 
 /// Which side of a circle wall the material is on.
@@ -138,6 +180,10 @@ pub enum SideSpec {
 
 fn default_side() -> SideSpec {
     SideSpec::Outside
+}
+
+fn inside() -> SideSpec {
+    SideSpec::Inside
 }
 
 /// Geometry of a body.
@@ -214,6 +260,10 @@ pub struct BodySpec {
     /// How particles are placed in the body.
     #[serde(default)]
     pub seeding: Seeding,
+    /// Seed only the part of the body inside the material region (clipped by the walls: a body poured
+    /// around an obstacle) instead of refusing a body that reaches past a wall.
+    #[serde(default)]
+    pub fill: bool,
 }
 
 /// A scene: the grid, time stepping, walls and bodies, and how walls act on the grid.
@@ -241,6 +291,12 @@ pub struct Scene {
     /// Condition of every wall (and the domain box) unless a wall names its own.
     #[serde(default)]
     pub wall_condition: WallCondition,
+    /// Coulomb friction coefficient μ of every `separate` wall (and the domain box, if separate) unless
+    /// a wall names its own: the tangential velocity against the wall shrinks by μ times the normal
+    /// velocity the wall stops; "inf" holds the material where it presses (it may still lift off).
+    #[serde(default, with = "friction")]
+    #[schemars(schema_with = "friction::schema")]
+    pub wall_friction: Real,
     /// The walls besides the domain box: polygons (material inside) and circles.
     #[serde(default)]
     pub walls: Vec<WallSpec>,
@@ -290,6 +346,72 @@ impl Default for AugmentedSpec {
     fn default() -> Self {
         Self { delta: default_delta(), spacing: default_spacing(), transfer: AugmentedTransfer::default() }
     }
+}
+
+/// A friction coefficient in scene files: a number ≥ 0, or "inf" (JSON has no infinity; TOML's `inf`
+/// reaches the engine as "inf").
+mod friction {
+    use super::Real;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum Given {
+        Number(Real),
+        Text(String),
+    }
+
+    fn parse<E: serde::de::Error>(given: Given) -> Result<Real, E> {
+        match given {
+            Given::Number(x) => Ok(x),
+            Given::Text(t) if t.eq_ignore_ascii_case("inf") => Ok(Real::INFINITY),
+            Given::Text(t) => Err(E::custom(format!("expected a number >= 0 or \"inf\", got {t:?}"))),
+        }
+    }
+
+    #[allow(clippy::unnecessary_cast)] // `Real` is f64 here, f32 in augmpm-core-f32
+    pub fn serialize<S: Serializer>(mu: &Real, s: S) -> Result<S::Ok, S::Error> {
+        if mu.is_infinite() && *mu > 0.0 {
+            s.serialize_str("inf")
+        } else {
+            s.serialize_f64(*mu as f64)
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Real, D::Error> {
+        parse(Given::deserialize(d)?)
+    }
+
+    pub fn schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "anyOf": [{"type": "number", "minimum": 0.0}, {"type": "string", "const": "inf"}],
+            "default": 0.0,
+            "unit": "1"
+        })
+    }
+
+    pub mod optional {
+        use super::*;
+
+        pub fn serialize<S: Serializer>(mu: &Option<Real>, s: S) -> Result<S::Ok, S::Error> {
+            match mu {
+                Some(mu) => super::serialize(mu, s),
+                None => s.serialize_none(),
+            }
+        }
+
+        pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Real>, D::Error> {
+            Option::<Given>::deserialize(d)?.map(parse).transpose()
+        }
+
+        pub fn optional_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+            schemars::json_schema!({
+                "anyOf": [{"type": "number", "minimum": 0.0}, {"type": "string", "const": "inf"}, {"type": "null"}],
+                "unit": "1"
+            })
+        }
+    }
+    pub use optional::optional_schema;
 }
 
 /// Bounds every item of a vector to be positive (a transform of its schema).
@@ -450,6 +572,36 @@ impl Scene {
             (Some(_), Some(_)) | (None, None) => return Err(SceneError::new("time", "give exactly one of dt and cfl")),
             _ => {}
         }
+        // Friction acts on separate walls only: a wall that names its own must be one, and a scene
+        // friction needs one to act on.
+        let conditions: Vec<WallCondition> =
+            self.walls.iter().map(|w| w.condition().unwrap_or(self.wall_condition)).collect();
+        for (i, (wall, condition)) in self.walls.iter().zip(&conditions).enumerate() {
+            if wall.friction().is_some_and(|mu| mu > 0.0) && *condition != WallCondition::Separate {
+                return Err(SceneError::new(
+                    format!("walls[{i}].friction"),
+                    format!("friction acts on separate walls; this wall is {condition:?}").to_lowercase(),
+                ));
+            }
+        }
+        for (i, wall) in self.walls.iter().enumerate() {
+            if let Some(motion) = wall.motion() {
+                motion.validate().map_err(|(k, reason)| SceneError::new(format!("walls[{i}].motion.{k}"), reason))?;
+                if self.grid.density_wall_correction {
+                    return Err(SceneError::new(
+                        "grid.density_wall_correction",
+                        format!("not available with moving walls (walls[{i}] moves)"),
+                    ));
+                }
+            }
+        }
+        let separate = self.wall_condition == WallCondition::Separate || conditions.contains(&WallCondition::Separate);
+        if self.wall_friction > 0.0 && !separate {
+            return Err(SceneError::new(
+                "wall_friction",
+                "friction acts on separate walls, and no wall (nor the domain box) is separate",
+            ));
+        }
         for (b, body) in self.bodies.iter().enumerate() {
             let key = format!("bodies[{b}]");
             if body.seeding.spacing.is_some() && body.seeding.per_cell.is_some() {
@@ -463,6 +615,15 @@ impl Scene {
             body.material.validate().map_err(|(k, reason)| SceneError::new(format!("{key}.material.{k}"), reason))?;
         }
         Ok(())
+    }
+
+    /// How a wall of `condition` acts: its own friction, else the scene's (on separate walls).
+    fn contact(&self, condition: WallCondition, friction: Option<Real>, moving: bool) -> WallContact {
+        let friction = match condition {
+            WallCondition::Separate => friction.unwrap_or(self.wall_friction),
+            _ => 0.0,
+        };
+        WallContact { condition, friction, moving }
     }
 
     /// Cell width h (m).
@@ -503,7 +664,7 @@ impl Scene {
     }
 
     /// The walls (with their surfaces' motion) and each wall's condition, the domain box last.
-    fn walls(&self, extent: Point) -> Result<(Walls2, Vec<WallCondition>), SceneError> {
+    fn walls(&self, extent: Point) -> Result<(Walls2, Vec<WallContact>), SceneError> {
         let mut shapes = Vec::new();
         let mut conditions = Vec::new();
         let mut motions = Vec::new();
@@ -514,14 +675,21 @@ impl Scene {
             let near_box = |p: &Point| (0..2).all(|k| p[k] >= -extent[k] && p[k] <= 2.0 * extent[k]);
             let far = || SceneError::new(&key, "wall lies far outside the domain box (more than one domain size away)");
             let (shape, condition, velocity) = match w {
-                WallSpec::Polygon { vertices, condition, velocity, tangential_speed } => {
+                WallSpec::Polygon { vertices, side, condition, velocity, tangential_speed, .. } => {
                     let poly = checked_polygon(&format!("{key}.vertices"), vertices.iter().map(point).collect())?;
                     if !poly.vertices.iter().all(near_box) {
                         return Err(far());
                     }
-                    (WallShape::Polygon(poly), condition, (velocity, tangential_speed, None))
+                    match side {
+                        SideSpec::Inside => (WallShape::Polygon(poly), condition, (velocity, *tangential_speed, None)),
+                        // The surface runs counter-clockwise around the polygon seen from outside too: its
+                        // normal into the wall points the other way.
+                        SideSpec::Outside => {
+                            (WallShape::Obstacle(poly), condition, (velocity, -*tangential_speed, None))
+                        }
+                    }
                 }
-                WallSpec::Circle { center, radius, side, condition, velocity, tangential_speed } => {
+                WallSpec::Circle { center, radius, side, condition, velocity, tangential_speed, .. } => {
                     let r = Point::repeat(*radius);
                     if !(near_box(&(point(center) - r)) && near_box(&(point(center) + r))) {
                         return Err(far());
@@ -531,23 +699,42 @@ impl Scene {
                         SideSpec::Inside => Side::Inside,
                     };
                     let circle = Circle { center: point(center), radius: *radius };
-                    (WallShape::Circle(circle, side), condition, (velocity, tangential_speed, Some(point(center))))
+                    (WallShape::Circle(circle, side), condition, (velocity, *tangential_speed, Some(point(center))))
                 }
             };
             let (velocity, speed, center) = velocity;
             shapes.push(shape);
-            conditions.push(condition.unwrap_or(self.wall_condition));
-            motions.push(SurfaceMotion { velocity: point(velocity), tangential_speed: *speed, center });
+            conditions.push(self.contact(condition.unwrap_or(self.wall_condition), w.friction(), w.motion().is_some()));
+            motions.push(SurfaceMotion { velocity: point(velocity), tangential_speed: speed, center });
         }
         // The domain box, always a wall, still.
-        conditions.push(self.wall_condition);
-        Ok((Walls2::new(shapes, extent).with_motions(motions), conditions))
+        conditions.push(self.contact(self.wall_condition, None, false));
+        let moves = self.walls.iter().map(|w| w.motion().cloned()).collect();
+        Ok((Walls2::new(shapes, extent).with_motions(motions).with_moves(moves), conditions))
     }
 
     /// The time step (s) of a validated scene, and a warning when `time.dt` exceeds the stable bound.
-    fn dt(&self, model_stable_dt: Real) -> Result<(Real, Option<String>), SceneError> {
+    /// The time step (s) of a validated scene, and a warning when `time.dt` exceeds the stable bound.
+    /// With moving walls, `fastest` (the fastest wall and its top speed, m/s) may move at most one cell
+    /// `h` (m) per step: `time.cfl` takes the step that keeps it there, a `time.dt` beyond is refused.
+    fn dt(
+        &self,
+        model_stable_dt: Real,
+        fastest: Option<(usize, Real)>,
+        h: Real,
+    ) -> Result<(Real, Option<String>), SceneError> {
         match (self.time.dt, self.time.cfl) {
             (Some(dt), _) => {
+                if let Some((wall, speed)) = fastest.filter(|(_, speed)| speed * dt > h) {
+                    return Err(SceneError::new(
+                        format!("walls[{wall}].motion"),
+                        format!(
+                            "moves up to {speed:.4e} m/s, {:.3} cells in a step of time.dt = {dt:e} s (at most one \
+                             cell per step); lower time.dt or give time.cfl",
+                            speed * dt / h
+                        ),
+                    ));
+                }
                 let warning = (dt > model_stable_dt).then(|| {
                     format!(
                         "time.dt = {dt:e} s exceeds the stable bound {model_stable_dt:e} s of the materials \
@@ -557,7 +744,8 @@ impl Scene {
                 Ok((dt, warning))
             }
             (None, cfl) => {
-                let dt = cfl.unwrap_or(1.0) * model_stable_dt;
+                let walls_dt = fastest.map_or(Real::INFINITY, |(_, speed)| h / speed);
+                let dt = cfl.unwrap_or(1.0) * model_stable_dt.min(walls_dt);
                 if !(dt.is_finite() && dt > 0.0) {
                     return Err(SceneError::new(
                         "time.cfl",
@@ -576,17 +764,12 @@ impl Scene {
         let h = layout.h;
         let extent = Point::new(layout.extent()[0], layout.extent()[1]);
         let (region, conditions) = self.walls(extent)?;
-        let surface = |wall: usize, x: &Point, n: &Point| region.surface_velocity(wall, x, n);
         let boundary = match method {
-            Method::Naive => Boundary::Naive(NaiveBoundary::new(&layout, &region, conditions, surface)),
+            Method::Naive => Boundary::Naive(NaiveBoundary::new(&layout, &region, conditions)),
             Method::Augmented => {
                 let (delta, spacing) = (self.augmented.delta, self.augmented.spacing);
-                let mut points = region.boundary_points(spacing * h);
-                for p in &mut points {
-                    p.velocity = surface(p.wall, &p.x, &p.normals[0]);
-                }
                 Boundary::Augmented(
-                    AugmentedGrid::new(&layout, &region, points, conditions, delta * h)
+                    AugmentedGrid::new(&layout, &region, spacing * h, conditions, delta * h)
                         .with_transfer(self.augmented.transfer),
                 )
             }
@@ -660,7 +843,16 @@ impl Scene {
             let key = format!("bodies[{b}]");
             materials.push(body.material.clone());
             let first = particles.len();
-            seed_body(&key, body, b, self.seed, h, &mut particles)?;
+            let mut seeded = Particles::<2>::default();
+            seed_body(&key, body, b, self.seed, h, &mut seeded)?;
+            let outside = |p: usize| region.distance(&seeded.x[p]).distance > 0.0;
+            if body.fill && (0..seeded.len()).all(outside) {
+                return Err(SceneError::new(key, "body lies outside the walls: nothing is left to fill"));
+            }
+            for p in (0..seeded.len()).filter(|&p| !(body.fill && outside(p))) {
+                let (pb, pm) = (seeded.body[p], seeded.material[p]);
+                particles.push(seeded.x[p], seeded.v[p], seeded.mass[p], seeded.vol0[p], pb, pm);
+            }
             let energy: f64 = (first..particles.len())
                 .map(|p| crate::particles::energy_root(particles.mass[p], &particles.v[p]).powi(2))
                 .sum();
@@ -688,6 +880,7 @@ impl Scene {
         let wall_fraction = (self.grid.density_wall_correction
             && materials.iter().any(crate::material::ConstitutiveModel::<2>::needs_grid_density))
         .then(|| crate::step::transfer::wall_fractions(&layout, &region));
+        let fastest = region.fastest();
         let mut model = Model {
             layout,
             materials,
@@ -697,7 +890,7 @@ impl Scene {
             wall_fraction,
             dt: 0.0,
         };
-        let (dt, warning) = self.dt(model.stable_dt())?;
+        let (dt, warning) = self.dt(model.stable_dt(), fastest, h)?;
         model.dt = dt;
         let mut warnings: Vec<String> = warning.into_iter().collect();
         if self.grid.density_wall_correction && model.wall_fraction.is_none() {

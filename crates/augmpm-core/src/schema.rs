@@ -6,7 +6,7 @@
 //!
 //! Only the parts of JSON Schema the derived schema uses are read: `$ref`, `type` (with `null` for
 //! optional keys), `properties`, `required`, `items`, `minItems`/`maxItems`, `oneOf` (choices of
-//! `const` strings, or objects told apart by the `const` of a tag key), `anyOf` (an optional choice),
+//! `const` strings, or objects told apart by the `const` of a tag key), `anyOf` (any one of its options),
 //! and the bounds `minimum`, `maximum`, `exclusiveMinimum`, `exclusiveMaximum`. Every object is
 //! closed: a key it does not declare is refused. Numbers must be finite.
 
@@ -47,12 +47,16 @@ fn walk(root: &Value, schema: &Value, value: &Value, key: &str) -> Result<(), In
         walk(root, resolve(root, reference), value, key)?;
     }
     if let Some(options) = schema.get("anyOf").and_then(Value::as_array) {
-        // An optional choice: null, or the one other option.
+        // Any one of the options (an optional key: null, or its type).
         if value.is_null() && options.iter().any(|o| o.get("type") == Some(&Value::from("null"))) {
             return Ok(());
         }
-        if let Some(other) = options.iter().find(|o| o.get("type") != Some(&Value::from("null"))) {
-            walk(root, other, value, key)?;
+        let others: Vec<&Value> = options.iter().filter(|o| o.get("type") != Some(&Value::from("null"))).collect();
+        let errors: Vec<Invalid> = others.iter().filter_map(|o| walk(root, o, value, key).err()).collect();
+        if errors.len() == others.len() && !errors.is_empty() {
+            // The error of the option of the value's own type (a number out of range), else the first.
+            let own = others.iter().position(|o| types(o).iter().any(|t| kind_of(value) == *t));
+            return Err(errors[own.unwrap_or(0)].clone());
         }
     }
     let variant = match schema.get("oneOf").and_then(Value::as_array) {
@@ -87,6 +91,18 @@ fn types(schema: &Value) -> Vec<&str> {
         Some(Value::String(t)) => vec![t.as_str()],
         Some(Value::Array(ts)) => ts.iter().filter_map(Value::as_str).collect(),
         _ => Vec::new(),
+    }
+}
+
+/// The JSON Schema type name of a value.
+fn kind_of(value: &Value) -> &'static str {
+    match value {
+        Value::Null => "null",
+        Value::Bool(_) => "boolean",
+        Value::Number(_) => "number",
+        Value::String(_) => "string",
+        Value::Array(_) => "array",
+        Value::Object(_) => "object",
     }
 }
 

@@ -42,6 +42,13 @@ where
         self.materials.iter().any(ConstitutiveModel::<D>::smooths_volume_ratio)
     }
 
+    /// Puts moving walls where they are at time `t` (s), moving over the step that starts there, and
+    /// has the wall treatment follow them.
+    pub fn follow_walls(&mut self, t: Real) {
+        self.region.set_time(t, self.dt);
+        self.boundary.follow(&self.layout, self.region.as_ref());
+    }
+
     /// The smallest stable time step (s) of the model's materials on its grid.
     pub fn stable_dt(&self) -> Real {
         self.materials
@@ -405,6 +412,10 @@ where
             smooths: model.materials.iter().map(ConstitutiveModel::<D>::smooths_volume_ratio).collect(),
             walls: WallParticles::default(),
         };
+        let mut model = model;
+        if model.region.moves() {
+            model.follow_walls(0.0);
+        }
         Self { model, state: State::new(particles), scratch, times: StageTimes::default(), pool: None, failed: None }
     }
 
@@ -521,6 +532,10 @@ where
         }?;
         self.state = state;
         self.failed = None;
+        if self.model.region.moves() {
+            self.model.follow_walls(self.state.time);
+            self.scratch.grid.resize(self.model.boundary.num_points(&self.model.layout));
+        }
         // The grid is cleared only where the binning says particles were: start from a clean one.
         let grid = &mut self.scratch.grid;
         grid.mass.fill(0.0);
@@ -535,10 +550,18 @@ where
     fn step_here(&mut self) -> Result<(), StepError> {
         let Self { model, state, scratch, times, .. } = self;
         let step = state.step + 1;
-        let (layout, dt) = (&model.layout, model.dt);
-        let left = |OutOfGrid(particle)| StepError::LeftGrid { step, particle, cause: likely_cause(model) };
+        let dt = model.dt;
         let mut lap = Lap::start();
 
+        // Moving walls are where they are at the start of the step (the end of the last one): the grid
+        // has a point for each of their boundary points.
+        let moving = model.region.moves();
+        if moving {
+            scratch.grid.resize(model.boundary.num_points(&model.layout));
+        }
+        let (layout, frozen) = (&model.layout, &*model);
+        let model = frozen;
+        let left = |OutOfGrid(particle)| StepError::LeftGrid { step, particle, cause: likely_cause(model) };
         // 1. Bin the particles again if due; clear the grid where the last step left values.
         scratch.prepare_grid(layout, &state.particles.x, &mut state.binning).map_err(left)?;
         lap.add_to(&mut times.sort);
@@ -579,7 +602,13 @@ where
         lap.add_to(&mut times.g2p);
 
         state.advance_clock(step, dt, outcome.max_move / layout.h, outcome.held_at_wall as u64);
-        match failure(step, &outcome, state.max_cfl, || likely_cause(model)) {
+        let failed = failure(step, &outcome, state.max_cfl, || likely_cause(model));
+        // 7. Moving walls go where they are at the end of the step; the treatment follows them.
+        if moving {
+            self.model.follow_walls(self.state.time);
+        }
+        let state = &mut self.state;
+        match failed {
             Some(e) => {
                 // A later call must not trust the binning of a state that went bad.
                 state.binning.drift = Real::INFINITY;

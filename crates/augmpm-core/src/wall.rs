@@ -35,16 +35,21 @@ impl WallCondition {
     /// into either face (the projection on the cone `u·n0 ≤ 0, u·n1 ≤ 0`).
     #[inline]
     pub fn apply_at<const D: usize>(self, v: Vector<D>, normals: &[Vector<D>; 2], wall_v: &Vector<D>) -> Vector<D> {
+        self.apply_relative(v, normals, &tangential(*wall_v, normals))
+    }
+
+    /// Applies the condition relative to a wall moving at `wall_v`, its normal part included (a wall
+    /// that moves as a rigid body).
+    #[inline]
+    pub fn apply_relative<const D: usize>(
+        self,
+        v: Vector<D>,
+        normals: &[Vector<D>; 2],
+        wall_v: &Vector<D>,
+    ) -> Vector<D> {
         let [n0, n1] = normals;
-        // Orthonormal basis {e0, e1} of span{n0, n1}. Two equal normals (no corner) leave a
-        // residue of the rounding (~1e-7 in f32): only a residue above it is a second direction.
-        let r = n1 - n0 * n1.dot(n0);
-        let e1 = (r.norm() > (1e-9 as Real).max(16.0 * Real::EPSILON)).then(|| r.normalize());
-        let tangential = |u: Vector<D>| {
-            let u = u - n0 * u.dot(n0);
-            e1.map_or(u, |e1| u - e1 * u.dot(&e1))
-        };
-        let wall_t = tangential(*wall_v);
+        let tangential = |u: Vector<D>| tangential(u, normals);
+        let wall_t = *wall_v;
         let rel = v - wall_t;
         let out = match self {
             WallCondition::Sticky => Vector::<D>::zeros(),
@@ -66,6 +71,75 @@ impl WallCondition {
             }
         };
         out + wall_t
+    }
+}
+
+/// The part of `u` orthogonal to both `normals` (the projection on the complement of their span).
+#[inline]
+fn tangential<const D: usize>(u: Vector<D>, [n0, n1]: &[Vector<D>; 2]) -> Vector<D> {
+    // Orthonormal basis {e0, e1} of span{n0, n1}. Two equal normals (no corner) leave a residue of
+    // the rounding (~1e-7 in f32): only a residue above it is a second direction.
+    let r = n1 - n0 * n1.dot(n0);
+    let u = u - n0 * u.dot(n0);
+    if r.norm() > (1e-9 as Real).max(16.0 * Real::EPSILON) {
+        let e1 = r.normalize();
+        u - e1 * u.dot(&e1)
+    } else {
+        u
+    }
+}
+
+/// How a wall acts on the material against it: its condition and, on a `separate` wall, its Coulomb
+/// friction coefficient μ (0: frictionless; infinite: no sliding while in contact, lift-off still free).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct WallContact {
+    pub condition: WallCondition,
+    /// μ ≥ 0, used on `separate` walls only.
+    pub friction: Real,
+    /// Whether the wall moves as a rigid body: its velocity then counts in full, normal part included
+    /// (a still wall's geometry stays, so only the tangential part of its surface velocity does).
+    pub moving: bool,
+}
+
+impl From<WallCondition> for WallContact {
+    fn from(condition: WallCondition) -> Self {
+        Self { condition, friction: 0.0, moving: false }
+    }
+}
+
+impl WallContact {
+    /// The contact at a wall of outward normal `n` (unit, into the wall) moving at `wall_v`.
+    #[inline]
+    pub fn apply<const D: usize>(self, v: Vector<D>, n: &Vector<D>, wall_v: &Vector<D>) -> Vector<D> {
+        self.apply_at(v, &[*n, *n], wall_v)
+    }
+
+    /// The condition at a point with one or two outward unit normals ([`WallCondition::apply_at`]),
+    /// then Coulomb friction: where the condition removed a velocity Δ into the wall (relative to
+    /// it), the tangential relative velocity shrinks by μ|Δ|, stopping where it would reverse (the
+    /// usual MPM update, Bardenhagen et al. 2000). Material moving off the wall is left as it is.
+    #[inline]
+    pub fn apply_at<const D: usize>(self, v: Vector<D>, normals: &[Vector<D>; 2], wall_v: &Vector<D>) -> Vector<D> {
+        let reference = if self.moving { *wall_v } else { tangential(*wall_v, normals) };
+        let out = self.condition.apply_relative(v, normals, &reference);
+        if self.friction == 0.0 || self.condition != WallCondition::Separate {
+            return out;
+        }
+        // `out − v` is what the condition removed: the normal velocity into the wall (relative to
+        // it: `out` and `v` carry the same wall velocity, only its tangential part, `wall_t`).
+        let pressed = (out - v).norm();
+        if pressed == 0.0 {
+            return out;
+        }
+        let wall_t = reference;
+        let slide = out - wall_t;
+        let speed = slide.norm();
+        let kept = if self.friction.is_infinite() || speed <= self.friction * pressed {
+            0.0
+        } else {
+            1.0 - self.friction * pressed / speed
+        };
+        wall_t + slide * kept
     }
 }
 
@@ -164,5 +238,28 @@ mod tests {
         let belt = Vector2::new(1.5, 0.0);
         assert_eq!(WallCondition::Sticky.apply(into, &n, &belt), belt);
         assert_eq!(WallCondition::Slip.apply(into, &n, &belt), Vector2::new(2.0, 0.0));
+    }
+
+    /// Coulomb friction on a separate floor (normal −y): pressing down at 1 m/s with a slide of
+    /// 2 m/s, μ = 0.5 leaves 2 − 0.5·1 = 1.5 m/s; μ = 3 stops the slide (it would reverse); infinite μ
+    /// stops it too; moving off the floor leaves the velocity as it is; μ = 0 is the plain condition.
+    #[test]
+    fn coulomb_friction_shrinks_the_slide_by_mu_times_the_stopped_normal_velocity() {
+        let n = Vector2::new(0.0, -1.0);
+        let still = Vector2::zeros();
+        let contact = |mu: Real| WallContact { condition: WallCondition::Separate, friction: mu, moving: false };
+        let pressing = Vector2::new(2.0, -1.0);
+        assert!((contact(0.5).apply(pressing, &n, &still) - Vector2::new(1.5, 0.0)).norm() < 1e-15);
+        assert_eq!(contact(3.0).apply(pressing, &n, &still), Vector2::zeros());
+        assert_eq!(contact(Real::INFINITY).apply(pressing, &n, &still), Vector2::zeros());
+        let lifting = Vector2::new(2.0, 0.5);
+        assert_eq!(contact(Real::INFINITY).apply(lifting, &n, &still), lifting);
+        assert_eq!(contact(0.0).apply(pressing, &n, &still), WallCondition::Separate.apply(pressing, &n, &still));
+        // Relative to a belt moving at 1 m/s: the slide is 1 m/s, μ = 0.5 leaves 0.5 m/s of it.
+        let belt = Vector2::new(1.0, 0.0);
+        assert!((contact(0.5).apply(pressing, &n, &belt) - Vector2::new(1.5, 0.0)).norm() < 1e-15);
+        // Friction acts on separate walls only.
+        let slip = WallContact { condition: WallCondition::Slip, friction: 0.5, moving: false };
+        assert_eq!(slip.apply(pressing, &n, &still), Vector2::new(2.0, 0.0));
     }
 }

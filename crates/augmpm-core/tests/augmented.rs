@@ -18,12 +18,11 @@ fn tilted_container(angle: f64, y0: f64) -> Walls2 {
 }
 
 fn augmented(walls: &Walls2, layout: &GridLayout<2>, delta_cells: f64) -> AugmentedGrid<2> {
-    let points = walls.boundary_points(layout.h);
     AugmentedGrid::new(
         layout,
         walls,
-        points,
-        vec![WallCondition::Sticky; walls.walls.len() + 1],
+        layout.h,
+        vec![WallCondition::Sticky.into(); walls.walls.len() + 1],
         delta_cells * layout.h,
     )
 }

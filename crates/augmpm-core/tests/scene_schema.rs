@@ -32,13 +32,16 @@ fn numeric(schema: &Value) -> bool {
         Value::Array(ts) => ts.iter().filter_map(Value::as_str).collect(),
         _ => vec![],
     };
-    kinds.iter().any(|k| *k == "number" || *k == "integer") || (kinds.contains(&"array") && numeric(&schema["items"]))
+    kinds.iter().any(|k| *k == "number" || *k == "integer")
+        || (kinds.contains(&"array") && numeric(&schema["items"]))
+        || schema.get("anyOf").and_then(Value::as_array).is_some_and(|o| o.iter().any(numeric))
 }
 
 /// Whether a schema or its items (down to the numbers) state a bound.
 fn bounded(schema: &Value) -> bool {
     ["minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"].iter().any(|b| schema.get(b).is_some())
         || schema.get("items").is_some_and(bounded)
+        || schema.get("anyOf").and_then(Value::as_array).is_some_and(|o| o.iter().any(bounded))
 }
 
 /// Every key has a one-line doc; every numeric key a unit and a range (bounds, or `unbounded`: any
@@ -146,6 +149,13 @@ fn errors_name_the_dotted_key() {
         ("/time/cfl", Some(json!(0.5)), "time: give exactly one of dt and cfl"),
         ("/gravity", Some(json!("down")), "gravity: must be a list, got \"down\""),
         ("/method", Some(json!("clever")), "method: must be one of \"naive\", \"augmented\", got \"clever\""),
+        ("/wall_friction", Some(json!(-0.5)), "wall_friction: must be at least 0.0, got -0.5"),
+        ("/wall_friction", Some(json!("lots")), "wall_friction: must be \"inf\", got \"lots\""),
+        (
+            "/walls/0/friction",
+            Some(json!(0.5)),
+            "walls[0].friction: friction acts on separate walls; this wall is sticky",
+        ),
         ("/bodies/0/max", Some(json!([0.05, 0.5])), "bodies[0].max: must exceed min along both axes"),
         (
             "/grid/domain",

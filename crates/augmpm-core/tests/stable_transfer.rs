@@ -61,8 +61,7 @@ struct Setup {
 
 fn setup(walls: Walls2, condition: WallCondition, ps: &Particles<2>, transfer: AugmentedTransfer) -> Setup {
     let layout = GridLayout::new(H, [32, 32]);
-    let points = walls.boundary_points(H);
-    let grid = AugmentedGrid::new(&layout, &walls, points, vec![condition; walls.walls.len() + 1], 0.25 * H)
+    let grid = AugmentedGrid::new(&layout, &walls, H, vec![condition.into(); walls.walls.len() + 1], 0.25 * H)
         .with_transfer(transfer);
     let mut schedule = Schedule::new(&layout);
     schedule.sort(&layout, &ps.x, &mut Binning::default()).unwrap();

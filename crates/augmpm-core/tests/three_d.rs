@@ -24,6 +24,11 @@ struct BoxRegion {
 }
 
 impl Region<3> for BoxRegion {
+    /// Points on the faces, at most `spacing` apart (the augmented grid's boundary points).
+    fn boundary_points(&self, spacing: Real) -> Vec<BoundaryPoint<3>> {
+        box_points(self, spacing)
+    }
+
     fn distance(&self, x: &V3) -> WallDistance<3> {
         // The nearest face: its outward normal and the signed distance (positive outside).
         let mut best = (Real::NEG_INFINITY, V3::zeros());
@@ -95,14 +100,13 @@ fn simulation(material: Material, augmented: bool) -> Simulation<3> {
     let layout = GridLayout::new(h, [16, 16, 16]);
     // Walls off the grid lines, so that the augmented grid drops nodes near them.
     let region = BoxRegion { lo: 0.1 + 0.3 * h, hi: 0.9 - 0.3 * h };
-    let condition = vec![WallCondition::Slip];
+    let condition = vec![WallCondition::Slip.into()];
     let boundary = if augmented {
-        let points = box_points(&region, h);
         let grid =
-            AugmentedGrid::new(&layout, &region, points, condition, 0.25 * h).with_transfer(AugmentedTransfer::Stable);
+            AugmentedGrid::new(&layout, &region, h, condition, 0.25 * h).with_transfer(AugmentedTransfer::Stable);
         Boundary::Augmented(grid)
     } else {
-        Boundary::Naive(NaiveBoundary::new(&layout, &region, condition, |_, _, _| V3::zeros()))
+        Boundary::Naive(NaiveBoundary::new(&layout, &region, condition))
     };
     let mut model = Model {
         layout,

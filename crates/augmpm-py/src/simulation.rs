@@ -289,6 +289,22 @@ impl PySimulation {
         })
     }
 
+    /// Each scene wall where it is now (moving walls follow their motion), as an (M, 2) array of the
+    /// vertices of its closed outline (a circle as 64 points), and whether it moves.
+    fn wall_outlines<'py>(&self, py: Python<'py>) -> PyResult<Vec<(Bound<'py, PyArray2<f64>>, bool)>> {
+        guard(|| {
+            with_sim!(&self.engine, s, core => {
+                let region = s.model.region.as_ref();
+                region
+                    .outlines()
+                    .iter()
+                    .enumerate()
+                    .map(|(i, outline)| Ok((vectors_to_array(py, outline)?, region.is_moving(i))))
+                    .collect()
+            })
+        })
+    }
+
     /// Step, time, kinetic energy, particles outside the walls, the deepest penetration (cell widths),
     /// and the augmented grid's counts of ill-conditioned particle-steps and low-mass node-steps.
     fn metrics<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {

@@ -118,6 +118,20 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
 
     plots.append(("Block on a frictionless incline", _plot_simple(out, "incline.png", draw_inc)))
 
+    rough = stage("block on a rough incline (Coulomb friction)", lambda: incline.run_friction(quick))
+
+    def draw_rough(ax):
+        for (method, angle, mu), (t, s, a) in rough.items():
+            t = np.asarray(t)
+            ax.plot(t, np.asarray(s) - s[0], "o" if method == "augmented" else "x", ms=3, color=COLOURS[method],
+                    label=f"{method} {angle:g}° μ={mu:g}")  # fmt: skip
+            if a > 0:
+                v0 = (s[1] - s[0]) / (t[1] - t[0]) - 0.5 * a * (t[1] - t[0])
+                ax.plot(t, v0 * (t - t[0]) + 0.5 * a * (t - t[0]) ** 2, "k-", lw=0.6)
+        ax.set(xlabel="t (s)", ylabel="distance slid (m)", title="Block on a rough incline (lines: g(sinθ − μ cosθ))")
+
+    plots.append(("Block on a rough incline", _plot_simple(out, "incline_friction.png", draw_rough)))
+
     hyd = stage("hydrostatic column", lambda: hydrostatic.run(quick, angles))
 
     def draw_hyd(ax):

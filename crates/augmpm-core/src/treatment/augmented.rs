@@ -7,7 +7,7 @@ use crate::geometry::Region;
 use crate::grid::{GridLayout, OutOfGrid};
 use crate::kernel::{weight, MlsInverse, MlsKind, Moments, Stencil};
 use crate::math::{floor_i64, DimOps, Real, Vector};
-use crate::wall::{BoundaryPoint, WallCondition};
+use crate::wall::{BoundaryPoint, WallContact};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -175,10 +175,12 @@ pub struct AugmentedGrid<const D: usize> {
     /// Boundary points by cell (cell = node at its lower corner): `cell_points[cell_start[c]..cell_start[c + 1]]`.
     cell_start: Vec<u32>,
     cell_points: Vec<u32>,
-    /// Condition of each wall.
-    pub walls: Vec<WallCondition>,
+    /// Condition and friction of each wall.
+    pub walls: Vec<WallContact>,
     /// Exclusion distance δ (m).
     pub delta: Real,
+    /// Largest spacing of the boundary points (m).
+    pub spacing: Real,
     /// Per cell (cell = node at its lower corner): the whole cell lies inside the material region.
     cell_inside: Vec<bool>,
     /// How particles and grid exchange mass and momentum.
@@ -186,11 +188,25 @@ pub struct AugmentedGrid<const D: usize> {
 }
 
 impl<const D: usize> AugmentedGrid<D> {
+    /// The augmented grid of `region`'s walls: boundary points at most `spacing` (m) apart, nodes
+    /// closer than `delta` (m) to a wall dropped.
     pub fn new(
         layout: &GridLayout<D>,
         region: &dyn Region<D>,
+        spacing: Real,
+        walls: Vec<WallContact>,
+        delta: Real,
+    ) -> Self {
+        Self::with_points(layout, region, region.boundary_points(spacing), spacing, walls, delta)
+    }
+
+    /// The augmented grid over the given boundary points (sampled at most `spacing` (m) apart).
+    pub fn with_points(
+        layout: &GridLayout<D>,
+        region: &dyn Region<D>,
         points: Vec<BoundaryPoint<D>>,
-        walls: Vec<WallCondition>,
+        spacing: Real,
+        walls: Vec<WallContact>,
         delta: Real,
     ) -> Self {
         let n = layout.num_nodes();
@@ -251,7 +267,14 @@ impl<const D: usize> AugmentedGrid<D> {
             })
             .collect();
         let transfer = AugmentedTransfer::default();
-        Self { points, included, closed_form, cell_start, cell_points, walls, delta, cell_inside, transfer }
+        Self { points, included, closed_form, cell_start, cell_points, walls, delta, spacing, cell_inside, transfer }
+    }
+
+    /// The same grid where the walls are now (after they moved).
+    pub fn follow(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>) {
+        let walls = std::mem::take(&mut self.walls);
+        let transfer = self.transfer;
+        *self = Self::new(layout, region, self.spacing, walls, self.delta).with_transfer(transfer);
     }
 
     /// The same grid with transfer `transfer`.

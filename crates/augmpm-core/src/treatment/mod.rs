@@ -8,6 +8,7 @@ pub mod augmented;
 pub mod naive;
 pub mod wall_fit;
 
+use crate::geometry::Region;
 use crate::grid::{GridLayout, OutOfGrid};
 use crate::kernel::{MlsInverse, MlsKind, Stencil};
 use crate::math::{DimOps, Real, Vector};
@@ -48,6 +49,10 @@ pub trait WallTreatment<const D: usize> {
 
     /// Applies the walls' conditions at the grid points they act on (velocities, after the grid update).
     fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>]);
+
+    /// Follows walls that moved: what the treatment keeps of them is built again where `region`'s
+    /// walls are now (the wall-side nodes; the boundary points, included nodes and point index).
+    fn follow(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>);
 
     /// What P2G and G2P see of the walls this step: the augmented grid and its table, or `None`
     /// (the transfers then run on the regular grid alone).
@@ -90,6 +95,9 @@ impl<const D: usize> WallTreatment<D> for NaiveBoundary<D> {
     }
     fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>]) {
         NaiveBoundary::apply(self, mass, velocity)
+    }
+    fn follow(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>) {
+        self.classify(layout, region)
     }
     fn transfer_view<'a>(&'a self, _: &'a WallParticles<D>) -> Option<(&'a AugmentedGrid<D>, &'a WallParticles<D>)> {
         None
@@ -143,6 +151,9 @@ impl<const D: usize> WallTreatment<D> for AugmentedGrid<D> {
     }
     fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>]) {
         AugmentedGrid::apply(self, mass, velocity)
+    }
+    fn follow(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>) {
+        AugmentedGrid::follow(self, layout, region)
     }
     fn transfer_view<'a>(
         &'a self,
@@ -203,6 +214,9 @@ impl<const D: usize> WallTreatment<D> for Boundary<D> {
     }
     fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>]) {
         dispatch!(self, t => WallTreatment::apply(t, mass, velocity))
+    }
+    fn follow(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>) {
+        dispatch!(self, t => WallTreatment::follow(t, layout, region))
     }
     fn transfer_view<'a>(
         &'a self,

@@ -4,7 +4,7 @@
 use crate::geometry::Region;
 use crate::grid::GridLayout;
 use crate::math::{Real, Vector};
-use crate::wall::WallCondition;
+use crate::wall::WallContact;
 
 /// A grid node on the wall side of the region, with the condition it gets.
 #[derive(Clone, Copy, Debug)]
@@ -21,20 +21,22 @@ pub struct WallNode<const D: usize> {
 #[derive(Clone, Debug)]
 pub struct NaiveBoundary<const D: usize> {
     pub nodes: Vec<WallNode<D>>,
-    /// Condition of each wall.
-    pub walls: Vec<WallCondition>,
+    /// Condition and friction of each wall.
+    pub walls: Vec<WallContact>,
 }
 
 impl<const D: usize> NaiveBoundary<D> {
-    /// Classifies every node of `layout` against `region` once (wall geometry does not move);
-    /// `surface_velocity(wall, x, normal)` gives the wall surface's velocity near `x`.
-    pub fn new(
-        layout: &GridLayout<D>,
-        region: &dyn Region<D>,
-        walls: Vec<WallCondition>,
-        surface_velocity: impl Fn(usize, &Vector<D>, &Vector<D>) -> Vector<D>,
-    ) -> Self {
-        let nodes = (0..layout.num_nodes())
+    /// Classifies every node of `layout` against `region`, each wall node with its wall's surface
+    /// velocity there.
+    pub fn new(layout: &GridLayout<D>, region: &dyn Region<D>, walls: Vec<WallContact>) -> Self {
+        let mut naive = Self { nodes: Vec::new(), walls };
+        naive.classify(layout, region);
+        naive
+    }
+
+    /// Classifies the nodes again, where the walls are now.
+    pub fn classify(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>) {
+        self.nodes = (0..layout.num_nodes())
             .filter_map(|node| {
                 let x = layout.position(node);
                 let d = region.distance(&x);
@@ -42,11 +44,10 @@ impl<const D: usize> NaiveBoundary<D> {
                     node,
                     normal: d.normal,
                     wall: d.wall,
-                    velocity: surface_velocity(d.wall, &x, &d.normal),
+                    velocity: region.surface_velocity(d.wall, &x, &d.normal),
                 })
             })
             .collect();
-        Self { nodes, walls }
     }
 
     /// Heap bytes of the wall-node list.

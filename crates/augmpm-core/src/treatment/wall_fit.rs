@@ -13,7 +13,7 @@
 use crate::geometry::{WallFeet, MAX_FEET};
 use crate::kernel::{bspline, MlsInverse};
 use crate::math::{Matrix, Real, Vector};
-use crate::wall::WallCondition;
+use crate::wall::{WallCondition, WallContact};
 
 /// Most wall terms of one particle: every foot, each with up to three rows (sticky in 3D).
 const MAX_ROWS: usize = MAX_FEET * 3;
@@ -66,7 +66,7 @@ pub fn fit_to_walls<const D: usize>(
     minv: &MlsInverse<D>,
     x: &Vector<D>,
     feet: &WallFeet<D>,
-    conditions: &[WallCondition],
+    conditions: &[WallContact],
     (h, dt): (Real, Real),
     v: &mut Vector<D>,
     c: &mut Matrix<D>,
@@ -98,7 +98,44 @@ pub fn fit_to_walls<const D: usize>(
                 len += 1;
             }
         };
-        match conditions[foot.wall] {
+        let contact = conditions[foot.wall];
+        if contact.moving {
+            // A wall moving as a rigid body: its conditions hold relative to its whole velocity.
+            let wall_n = n.dot(&foot.velocity);
+            match contact.condition {
+                WallCondition::Sticky => {
+                    let wall = foot.velocity - n * inward;
+                    for k in 0..D {
+                        let mut axis = Vector::<D>::zeros();
+                        axis[k] = 1.0;
+                        row(axis, wall[k]);
+                    }
+                }
+                WallCondition::Slip => row(n, wall_n - inward),
+                WallCondition::Separate => {
+                    let pressed = n.dot(&fitted) - wall_n + inward;
+                    if pressed > 0.0 && contact.friction > 0.0 {
+                        let slide = fitted - n * n.dot(&fitted) - (foot.velocity - n * wall_n);
+                        let speed = slide.norm();
+                        let kept = if contact.friction.is_infinite() || speed <= contact.friction * pressed {
+                            0.0
+                        } else {
+                            1.0 - contact.friction * pressed / speed
+                        };
+                        let target = foot.velocity - n * inward + slide * kept;
+                        for k in 0..D {
+                            let mut axis = Vector::<D>::zeros();
+                            axis[k] = 1.0;
+                            row(axis, target[k]);
+                        }
+                    } else if pressed > 0.0 {
+                        row(n, wall_n - inward)
+                    }
+                }
+            }
+            continue;
+        }
+        match contact.condition {
             WallCondition::Sticky => {
                 // The wall's geometry is still: only its tangential surface velocity counts.
                 let wall = foot.velocity - n * (n.dot(&foot.velocity) + inward);
@@ -109,6 +146,27 @@ pub fn fit_to_walls<const D: usize>(
                 }
             }
             WallCondition::Slip => row(n, -inward),
+            WallCondition::Separate if contact.friction > 0.0 => {
+                // In contact, the fit meets the Coulomb update of its own value at the foot (the same
+                // cone as at the grid points): every component, like a sticky wall moving at it.
+                let pressed = n.dot(&fitted) + inward;
+                if pressed > 0.0 {
+                    let wall_t = foot.velocity - n * n.dot(&foot.velocity);
+                    let slide = fitted - n * n.dot(&fitted) - wall_t;
+                    let speed = slide.norm();
+                    let kept = if contact.friction.is_infinite() || speed <= contact.friction * pressed {
+                        0.0
+                    } else {
+                        1.0 - contact.friction * pressed / speed
+                    };
+                    let target = wall_t + slide * kept - n * inward;
+                    for k in 0..D {
+                        let mut axis = Vector::<D>::zeros();
+                        axis[k] = 1.0;
+                        row(axis, target[k]);
+                    }
+                }
+            }
             WallCondition::Separate => {
                 if n.dot(&fitted) > -inward {
                     row(n, -inward)
@@ -210,7 +268,7 @@ mod tests {
             [(WallCondition::Slip, Vector2::new(0.3, 0.0)), (WallCondition::Sticky, Vector2::zeros())]
         {
             let (mut v, mut c) = (Vector2::new(0.3, -0.7), Matrix2::new(1.0, 2.0, 3.0, 4.0));
-            fit_to_walls(&minv, &x, &feet, &[condition], (h, 1e-3), &mut v, &mut c);
+            fit_to_walls(&minv, &x, &feet, &[condition.into()], (h, 1e-3), &mut v, &mut c);
             assert!((v - expect).norm() < 1e-12, "{condition:?}: {v}");
         }
     }
@@ -227,12 +285,31 @@ mod tests {
         let stretch = Matrix2::new(0.0, 0.0, 0.0, 20.0);
         let mut feet = foot(Vector2::new(0.5, 0.8), normal, 0.0);
         let (mut v, mut c) = (Vector2::new(1.0, 0.0), stretch);
-        fit_to_walls(&minv, &x, &feet, &[WallCondition::Slip], (h, 1e-3), &mut v, &mut c);
+        fit_to_walls(&minv, &x, &feet, &[WallCondition::Slip.into()], (h, 1e-3), &mut v, &mut c);
         assert!((v.dot(&normal) - depth * 20.0).abs() < 1e-6 * depth * 20.0, "at the foot: {v}");
         feet.pin_past(&x);
         let (mut v, mut c) = (Vector2::new(1.0, 0.0), stretch);
-        fit_to_walls(&minv, &x, &feet, &[WallCondition::Slip], (h, 1e-3), &mut v, &mut c);
+        fit_to_walls(&minv, &x, &feet, &[WallCondition::Slip.into()], (h, 1e-3), &mut v, &mut c);
         assert!(v.dot(&normal).abs() < 1e-15 && (v.x - 1.0).abs() < 1e-12, "pinned: {v}");
+    }
+
+    /// A particle on a rough separate floor (μ = 0.5) whose fit presses into it at 1 m/s while sliding
+    /// at 2 m/s takes the Coulomb update of its fit at its foot: no normal velocity, 1.5 m/s of slide;
+    /// one whose fit lifts off keeps it.
+    #[test]
+    fn a_pressing_particle_on_a_rough_wall_meets_the_friction_cone() {
+        let h = 0.01;
+        let minv = MlsInverse::<2>::regular(h);
+        let normal = Vector2::new(0.0, -1.0); // into the floor at y = 0.2
+        let x = Vector2::new(0.5, 0.2);
+        let feet = foot(x, normal, 0.0);
+        let rough = [WallContact { condition: WallCondition::Separate, friction: 0.5, moving: false }];
+        let (mut v, mut c) = (Vector2::new(2.0, -1.0), Matrix2::zeros());
+        fit_to_walls(&minv, &x, &feet, &rough, (h, 1e-3), &mut v, &mut c);
+        assert!((v - Vector2::new(1.5, 0.0)).norm() < 1e-12, "pressing: {v}");
+        let (mut v, mut c) = (Vector2::new(2.0, 0.5), Matrix2::zeros());
+        fit_to_walls(&minv, &x, &feet, &rough, (h, 1e-3), &mut v, &mut c);
+        assert_eq!(v, Vector2::new(2.0, 0.5), "lifting off");
     }
 
     /// A particle past both faces of a sticky corner, both feet pinned to it, takes the wall's velocity
@@ -250,7 +327,7 @@ mod tests {
         }
         feet.pin_past(&x);
         let (mut v, mut c) = (Vector2::new(0.3, -0.7), Matrix2::new(1.0, 2.0, 3.0, 4.0));
-        fit_to_walls(&minv, &x, &feet, &[WallCondition::Sticky], (h, 1e-3), &mut v, &mut c);
+        fit_to_walls(&minv, &x, &feet, &[WallCondition::Sticky.into()], (h, 1e-3), &mut v, &mut c);
         assert!(v.norm() < 1e-12, "{v}");
     }
 
@@ -265,7 +342,7 @@ mod tests {
         let x = centre + Vector2::new(radius, 0.0);
         let feet = foot(centre + Vector2::new(radius, 0.0), Vector2::new(1.0, 0.0), 1.0 / radius);
         let (mut v, mut c) = (Vector2::new(0.0, u), Matrix2::zeros());
-        fit_to_walls(&minv, &x, &feet, &[WallCondition::Slip], (h, dt), &mut v, &mut c);
+        fit_to_walls(&minv, &x, &feet, &[WallCondition::Slip.into()], (h, dt), &mut v, &mut c);
         let moved = (x + v * dt - centre).norm();
         assert!((moved - (x - centre).norm()).abs() < 1e-12, "{moved}");
         assert!((v.y - u).abs() < 1e-12 && v.x < 0.0);
