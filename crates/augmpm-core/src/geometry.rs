@@ -35,6 +35,9 @@ pub struct WallFoot<const D: usize> {
     /// 1/radius (1/m) of a face that curves around the material (a circular container); 0 for a
     /// straight face and for one that curves away from the material (an obstacle).
     pub curvature: Real,
+    /// Velocity (m/s) of the face's centre of curvature as the wall moves (zero for a still wall): what
+    /// a particle's motion along a curved face is measured against.
+    pub centre_velocity: Vector<D>,
 }
 
 /// Most wall faces a particle takes into account at once (a corner has two; a narrow gap more).
@@ -613,7 +616,14 @@ impl Region<2> for Walls2 {
         let mut add = |q: Point, normal: Point, wall: usize, curvature: Real| {
             if self.distance(&q).distance.abs() <= tolerance {
                 let velocity = self.velocity_at(wall, &q, &normal);
-                feet.push(WallFoot { x: q, normal, wall, velocity, curvature }, (x - q).norm(), tolerance);
+                let centre_velocity = if curvature > 0.0 && self.is_moving(wall) && self.dt > 0.0 {
+                    let c = q - normal / curvature;
+                    (self.next[wall].place(&self.now[wall].unplace(&c)) - c) / self.dt
+                } else {
+                    Point::zeros()
+                };
+                let foot = WallFoot { x: q, normal, wall, velocity, curvature, centre_velocity };
+                feet.push(foot, (x - q).norm(), tolerance);
             }
         };
         for (wall, poly, obstacle) in self.polygons() {
@@ -789,7 +799,14 @@ mod tests {
         for k in 0..(MAX_FEET + 2) {
             let d = [0.5, 0.1, 0.4, 0.05, 0.3, 0.2][k];
             let n = Point::new((k as Real).cos(), (k as Real).sin());
-            let foot = WallFoot { x: n * d, normal: n, wall: k, velocity: Point::zeros(), curvature: 0.0 };
+            let foot = WallFoot {
+                x: n * d,
+                normal: n,
+                wall: k,
+                velocity: Point::zeros(),
+                curvature: 0.0,
+                centre_velocity: Point::zeros(),
+            };
             feet.push(foot, d, 1e-12);
         }
         let mut kept: Vec<usize> = feet.iter().map(|f| f.wall).collect();

@@ -55,7 +55,9 @@ impl Region<3> for BoxRegion {
                     let (mut foot, mut normal) = (*x, V3::zeros());
                     foot[k] = side;
                     normal[k] = sign;
-                    let wall = WallFoot { x: foot, normal, wall: 0, velocity: V3::zeros(), curvature: 0.0 };
+                    let still = V3::zeros();
+                    let wall =
+                        WallFoot { x: foot, normal, wall: 0, velocity: still, curvature: 0.0, centre_velocity: still };
                     feet.push(wall, distance, 1e-12);
                 }
             }

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from augmpm.files import save_png, write_text
-from augmpm.validation import channel, dam_break, hydrostatic, incline, interpolation, rotation
+from augmpm.validation import channel, dam_break, hydrostatic, incline, interpolation, moving, rotation
 from augmpm.validation.records import Record
 
 ANGLES = [0.0, 15.0, 30.0, 45.0]
@@ -131,6 +131,8 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
         ax.set(xlabel="t (s)", ylabel="distance slid (m)", title="Block on a rough incline (lines: g(sinθ − μ cosθ))")
 
     plots.append(("Block on a rough incline", _plot_simple(out, "incline_friction.png", draw_rough)))
+
+    stage("walls that move (containers carried, turned, shaken; a piston)", lambda: moving.run(quick))
 
     hyd = stage("hydrostatic column", lambda: hydrostatic.run(quick, angles))
 

@@ -86,7 +86,10 @@ pub fn fit_to_walls<const D: usize>(
         let inward = if foot.curvature > 0.0 && dt > 0.0 {
             // The particle's distance from the circle's centre (the foot lies a radius out along n).
             let rho = (*x - (foot.x - n / foot.curvature)).norm();
-            let step = (*v - n * n.dot(v)).norm() * dt;
+            // Along the face relative to its centre of curvature, which a moving wall carries (a circle
+            // turning about its centre stays where it is).
+            let along = if conditions[foot.wall].moving { *v - foot.centre_velocity } else { *v };
+            let step = (along - n * n.dot(&along)).norm() * dt;
             // Inward by δ with (ρ − δ)² + step² = ρ²: the step's chord ends at ρ again.
             (rho - (rho * rho - step * step).max(0.0).sqrt()) / dt
         } else {
@@ -243,7 +246,8 @@ mod tests {
 
     fn foot(x: Vector2<Real>, normal: Vector2<Real>, curvature: Real) -> WallFeet<2> {
         let mut feet = WallFeet::default();
-        feet.push(WallFoot { x, normal, wall: 0, velocity: Vector2::zeros(), curvature }, 0.0, 1e-12);
+        let centre_velocity = Vector2::zeros();
+        feet.push(WallFoot { x, normal, wall: 0, velocity: Vector2::zeros(), curvature, centre_velocity }, 0.0, 1e-12);
         feet
     }
 
@@ -323,7 +327,9 @@ mod tests {
         for (foot, normal) in
             [(Vector2::new(0.5, x.y), Vector2::new(1.0, 0.0)), (Vector2::new(x.x, 0.5), Vector2::new(0.0, 1.0))]
         {
-            feet.push(WallFoot { x: foot, normal, wall: 0, velocity: Vector2::zeros(), curvature: 0.0 }, 1e-7, 1e-12);
+            let still = Vector2::zeros();
+            let foot = WallFoot { x: foot, normal, wall: 0, velocity: still, curvature: 0.0, centre_velocity: still };
+            feet.push(foot, 1e-7, 1e-12);
         }
         feet.pin_past(&x);
         let (mut v, mut c) = (Vector2::new(0.3, -0.7), Matrix2::new(1.0, 2.0, 3.0, 4.0));
