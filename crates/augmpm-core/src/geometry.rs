@@ -414,7 +414,8 @@ impl Walls2 {
             return surface;
         }
         let carried = (self.next[wall].place(&self.now[wall].unplace(x)) - x) / self.dt;
-        carried + surface
+        // The surface's own motion runs along the wall (a scene's `velocity` acts by its part along it).
+        carried + (surface - n * n.dot(&surface))
     }
 
     /// Index of the domain box among the walls.
@@ -867,5 +868,26 @@ mod tests {
         let corner = feet.iter().find(|f| f.wall == 0).expect("the corner is a foot");
         assert!((corner.x - Point::new(0.4, 0.4)).norm() < 1e-15);
         assert!((corner.normal - (corner.x - x).normalize()).norm() < 1e-12);
+    }
+
+    /// A moving wall's velocity at a point is its displacement over the step divided by the step: a box
+    /// carried at (0.3, 0) m/s and turning at 1 rad/s about its centre moves a point 0.1 m right of the
+    /// centre at (0.3, 0.1) m/s (to first order in the step); a surface velocity given on it acts along
+    /// the wall only.
+    #[test]
+    fn a_moving_wall_carries_its_points() {
+        let square =
+            Polygon::new(vec![Point::new(0.3, 0.3), Point::new(0.7, 0.3), Point::new(0.7, 0.7), Point::new(0.3, 0.7)]);
+        let motion = Motion::Constant { velocity: [0.3, 0.0], angular_velocity: 1.0, pivot: None };
+        let push = SurfaceMotion { velocity: Point::new(0.0, 5.0), tangential_speed: 0.0, center: None };
+        let mut walls = Walls2::new(vec![WallShape::Polygon(square)], Point::new(1.0, 1.0))
+            .with_motions(vec![push])
+            .with_moves(vec![Some(motion)]);
+        walls.set_time(0.0, 1e-6);
+        let n = Point::new(0.0, 1.0); // the top face, at y = 0.7
+        let v = walls.velocity_at(0, &Point::new(0.6, 0.7), &n);
+        // Carried: (0.3, 0) + 1 rad/s × (0.1, 0.2) = (0.3 − 0.2, 0.1); the push (0, 5) is normal to the face.
+        assert!((v - Point::new(0.1, 0.1)).norm() < 1e-5, "{v}");
+        assert!(walls.moves() && walls.is_moving(0) && !walls.is_moving(1));
     }
 }
