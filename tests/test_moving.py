@@ -97,3 +97,22 @@ def test_bad_motions_are_refused_naming_the_key(small_scene, motion, key, reason
     with pytest.raises(augmpm.SceneError) as err:
         augmpm.Simulation(augmpm.Scene.from_dict(small_scene))
     assert err.value.key == key and reason in err.value.reason, str(err.value)
+
+
+def test_the_vtk_series_carries_the_walls_of_each_frame(tmp_path):
+    """`augmpm run` of a scene whose walls move writes each frame's walls (vtk/walls/frame_*.vtp, indexed by
+    walls.pvd beside particles.pvd): one per frame, each where the walls were then. Still walls are written
+    once (vtk/walls/walls.vtp)."""
+    from augmpm.cli import main
+
+    out = tmp_path / "turning"
+    args = ["run", "moving/turning_box", "--out", str(out), "--set", "time.end=0.05", "--no-render", "--no-progress"]
+    assert main(args) == 0
+    frames = sorted((out / "vtk" / "walls").glob("frame_*.vtp"))
+    assert len(frames) == len(list((out / "vtk").glob("frame_*.vtp"))) >= 3
+    assert frames[0].read_text() != frames[-1].read_text()
+    assert (out / "walls.pvd").read_text().count("vtk/walls/frame_") == len(frames)
+    still = tmp_path / "still"
+    args = ["run", "dam_break", "--out", str(still), "--steps", "40", "--no-render", "--no-progress"]
+    assert main(args) == 0
+    assert (still / "vtk" / "walls" / "walls.vtp").exists() and not (still / "walls.pvd").exists()

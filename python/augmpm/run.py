@@ -2,7 +2,8 @@
 
 Layout of DIR: ``scene.toml`` (the resolved scene), ``metrics.csv`` (one row
 per output frame), ``particles/frame_00000.npz`` (``x``, ``v``, ``body``),
-``frames/frame_00000.png``, ``vtk/frame_00000.vtp`` with ``particles.pvd``,
+``frames/frame_00000.png``, ``vtk/frame_00000.vtp`` with ``particles.pvd`` (and the walls: ``vtk/walls/walls.vtp``,
+or per frame ``vtk/walls/frame_00000.vtp`` with ``walls.pvd`` when walls move),
 ``animation.mp4`` (or ``.gif``), and ``checkpoint.npz`` (the state at the last
 checkpoint, from which :func:`resume_run` continues).
 
@@ -36,7 +37,7 @@ from augmpm.files import npz_bytes, output_dir, remove_stale_temporaries, write_
 from augmpm.render import FrameRenderer, write_animation
 from augmpm.scene import Scene, _plain_error
 from augmpm.simulation import Method, Simulation
-from augmpm.vtk import write_pvd, write_vtp
+from augmpm.vtk import write_outlines_vtp, write_pvd, write_vtp
 
 METRIC_COLUMNS = [
     "step",
@@ -156,6 +157,8 @@ def resume_run(
     # The index files first, then the frames after the checkpoint: no row ever names a removed frame.
     run.commit(rewrite=True)
     write_pvd(out / "particles.pvd", run.vtk_frames)
+    if run.wall_frames:
+        write_pvd(out / "walls.pvd", run.wall_frames)
     _remove_frames_after(out, frame)
     for partial in out.glob("*.partial.*"):
         partial.unlink()
@@ -185,7 +188,15 @@ class _Run:
         self.pending: deque[tuple[dict, Future | None]] = deque()
         self.total = int(meta["total_steps"])
         self.vtk_frames = [(float(r["time"]), f"vtk/frame_{i:05d}.vtp") for i, r in enumerate(rows)]
-        for sub in ("particles", "frames", "vtk"):
+        # The walls of each frame (vtk/walls/, indexed by walls.pvd) when some move; still ones once
+        # (vtk/walls/walls.vtp).
+        outlines = sim.wall_outlines()
+        self.walls = any(moving for _, moving in outlines)
+        self.wall_frames = [(t, f.replace("vtk/", "vtk/walls/")) for t, f in self.vtk_frames] if self.walls else []
+        if outlines and not self.walls:
+            (out / "vtk" / "walls").mkdir(parents=True, exist_ok=True)
+            write_outlines_vtp(out / "vtk" / "walls" / "walls.vtp", [o for o, _ in outlines])
+        for sub in ("particles", "frames", "vtk", *(["vtk/walls"] if self.walls else [])):
             (out / sub).mkdir(exist_ok=True)
 
     def go(self, raise_on_failure: bool) -> RunResult:
@@ -248,6 +259,10 @@ class _Run:
         write_vtp(out / "vtk" / f"{name}.vtp", x, {"velocity": v, "body": body})
         self.vtk_frames.append((sim.time, f"vtk/{name}.vtp"))
         write_pvd(out / "particles.pvd", self.vtk_frames)
+        if self.walls:
+            write_outlines_vtp(out / "vtk" / "walls" / f"{name}.vtp", [o for o, _ in sim.wall_outlines()])
+            self.wall_frames.append((sim.time, f"vtk/walls/{name}.vtp"))
+            write_pvd(out / "walls.pvd", self.wall_frames)
         png = None
         if self.renderer is not None:
             moving = [outline for outline, moves in sim.wall_outlines() if moves]
@@ -334,7 +349,7 @@ def _read_metrics(path: Path) -> list[dict[str, str]]:
 
 def _remove_frames_after(out: Path, frame: int) -> None:
     """Removes the frame files numbered above ``frame`` (all of them for -1)."""
-    for sub in ("particles", "frames", "vtk"):
+    for sub in ("particles", "frames", "vtk", "vtk/walls"):
         if (out / sub).is_dir():
             for f in (out / sub).glob("frame_*.*"):
                 m = _FRAME.match(f.name)

@@ -1,4 +1,5 @@
-"""ParaView output: one ``.vtp`` (VTK XML PolyData) per frame and a ``.pvd`` index.
+"""ParaView output: one ``.vtp`` (VTK XML PolyData) per frame and a ``.pvd`` index; the walls of each frame
+(where moving walls are then) likewise, as polylines.
 
 meshio writes unstructured grids (``.vtu``) but not PolyData, which is the
 natural type of a point cloud, so the few lines of XML are written here.
@@ -50,6 +51,31 @@ def write_vtp(path: Path, x: np.ndarray, point_data: dict[str, np.ndarray]) -> N
         f"<Points>{_data_array('Points', points, 3)}</Points>\n"
         f"<Verts>{_data_array('connectivity', conn, 1)}{_data_array('offsets', offsets, 1)}</Verts>\n"
         f"<PointData>{''.join(arrays)}</PointData>\n"
+        "</Piece></PolyData>\n</VTKFile>\n"
+    )
+    write_text(path, xml, encoding="ascii")
+
+
+def write_outlines_vtp(path: Path, outlines: list[np.ndarray]) -> None:
+    """Writes closed outlines ((M, 2) vertices each, m) as polylines at z = 0, with a cell array `wall`
+    (the outline's index): the walls of one frame."""
+    points = np.zeros((sum(len(o) for o in outlines), 3))
+    conn, offsets, start = [], [], 0
+    for o in outlines:
+        points[start : start + len(o), :2] = o
+        conn.extend([*range(start, start + len(o)), start])  # closed: back to the first vertex
+        offsets.append(len(conn))
+        start += len(o)
+    wall = np.arange(len(outlines), dtype=np.int32)
+    xml = (
+        '<?xml version="1.0"?>\n'
+        '<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian" header_type="UInt32">\n'
+        f'<PolyData><Piece NumberOfPoints="{len(points)}" NumberOfVerts="0" NumberOfLines="{len(outlines)}" '
+        'NumberOfStrips="0" NumberOfPolys="0">\n'
+        f"<Points>{_data_array('Points', points, 3)}</Points>\n"
+        f"<Lines>{_data_array('connectivity', np.asarray(conn, dtype=np.int64), 1)}"
+        f"{_data_array('offsets', np.asarray(offsets, dtype=np.int64), 1)}</Lines>\n"
+        f"<CellData>{_data_array('wall', wall, 1)}</CellData>\n"
         "</Piece></PolyData>\n</VTKFile>\n"
     )
     write_text(path, xml, encoding="ascii")
