@@ -116,3 +116,14 @@ def test_the_vtk_series_carries_the_walls_of_each_frame(tmp_path):
     args = ["run", "dam_break", "--out", str(still), "--steps", "40", "--no-render", "--no-progress"]
     assert main(args) == 0
     assert (still / "vtk" / "walls" / "walls.vtp").exists() and not (still / "walls.pvd").exists()
+
+
+def test_the_papers_transfer_is_refused_with_moving_walls(small_scene):
+    """The paper's transfer holds particles found past a wall against a still wall; with a moving wall it is
+    refused naming the key, not run wrong."""
+    small_scene["walls"][0]["motion"] = {"type": "constant", "velocity": [0.01, 0.0]}
+    small_scene["augmented"] = {"transfer": "paper"}
+    with pytest.raises(augmpm.SceneError) as err:
+        augmpm.Simulation(augmpm.Scene.from_dict(small_scene), "augmented")
+    assert err.value.key == "augmented.transfer"
+    augmpm.Simulation(augmpm.Scene.from_dict(small_scene), "naive")

@@ -30,7 +30,8 @@ pub struct WallFoot<const D: usize> {
     pub normal: Vector<D>,
     /// Index of the wall in [`Region::distance`] order.
     pub wall: usize,
-    /// Velocity of the wall surface there (m/s); only its tangential part acts.
+    /// Velocity of the wall surface there (m/s): of a still wall only its tangential part acts, of a
+    /// moving one all of it.
     pub velocity: Vector<D>,
     /// 1/radius (1/m) of a face that curves around the material (a circular container); 0 for a
     /// straight face and for one that curves away from the material (an obstacle).
@@ -409,10 +410,13 @@ impl Walls2 {
     /// wall's own velocity there (its displacement over the step, divided by the step) plus the motion
     /// of its surface along it.
     fn velocity_at(&self, wall: usize, x: &Point, n: &Point) -> Point {
-        let surface = self.motions[wall].at(x, n);
         if !self.is_moving(wall) || self.dt == 0.0 {
-            return surface;
+            return self.motions[wall].at(x, n);
         }
+        // The scene's surface velocity turns with the wall.
+        let motion = &self.motions[wall];
+        let turned = SurfaceMotion { velocity: self.now[wall].turn(&motion.velocity), ..*motion };
+        let surface = turned.at(x, n);
         let carried = (self.next[wall].place(&self.now[wall].unplace(x)) - x) / self.dt;
         // The surface's own motion runs along the wall (a scene's `velocity` acts by its part along it).
         carried + (surface - n * n.dot(&surface))

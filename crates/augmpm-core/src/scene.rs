@@ -100,7 +100,7 @@ pub enum WallSpec {
         #[serde(default, with = "friction::optional")]
         #[schemars(schema_with = "friction::optional_schema")]
         friction: Option<Real>,
-        /// Velocity of the wall's surface; only its part along the wall acts (the wall stays put).
+        /// Velocity of the wall's surface; only its part along the wall acts (it turns with a moving wall).
         #[serde(default)]
         #[schemars(extend("unit" = "m/s", "unbounded" = true))]
         velocity: [Real; 2],
@@ -131,7 +131,7 @@ pub enum WallSpec {
         #[serde(default, with = "friction::optional")]
         #[schemars(schema_with = "friction::optional_schema")]
         friction: Option<Real>,
-        /// Velocity of the wall's surface; only its part along the wall acts (the wall stays put).
+        /// Velocity of the wall's surface; only its part along the wall acts (it turns with a moving wall).
         #[serde(default)]
         #[schemars(extend("unit" = "m/s", "unbounded" = true))]
         velocity: [Real; 2],
@@ -168,13 +168,13 @@ impl WallSpec {
     }
 }
 
-/// Which side of a circle wall the material is on.
+/// Which side of a wall the material is on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum SideSpec {
-    /// Around the circle: an obstacle.
+    /// Around the wall: an obstacle.
     Outside,
-    /// In the circle: a container.
+    /// In the wall: a container.
     Inside,
 }
 
@@ -297,7 +297,7 @@ pub struct Scene {
     #[serde(default, with = "friction")]
     #[schemars(schema_with = "friction::schema")]
     pub wall_friction: Real,
-    /// The walls besides the domain box: polygons (material inside) and circles.
+    /// The walls besides the domain box: polygons and circles, containers or obstacles.
     #[serde(default)]
     pub walls: Vec<WallSpec>,
     /// The bodies of material: a run needs at least one; the walls of a scene without bodies can be
@@ -560,7 +560,27 @@ impl Scene {
     /// finite numbers, unknown keys), then the rules that tie keys together (one of `time.dt` and
     /// `time.cfl`, a whole number of cells, ...). [`Scene::build`] calls it first.
     pub fn validate(&self) -> Result<(), SceneError> {
-        // A scene built in code may hold a NaN or an infinity, which JSON writes as null: refused below.
+        // A scene built in code may hold a NaN or an infinity, which JSON writes as null: the schema
+        // refuses it where a number is required, and here where a number is optional (null: not given).
+        let t = &self.time;
+        let mut optional: Vec<(String, Option<Real>)> =
+            vec![("time.dt".into(), t.dt), ("time.cfl".into(), t.cfl), ("time.end".into(), t.end)];
+        optional.extend(
+            self.bodies
+                .iter()
+                .enumerate()
+                .map(|(b, body)| (format!("bodies[{b}].seeding.spacing"), body.seeding.spacing)),
+        );
+        if let Some((key, v)) = optional.into_iter().find_map(|(k, v)| v.filter(|v| !v.is_finite()).map(|v| (k, v))) {
+            return Err(SceneError::new(key, format!("must be a finite number, got {v}")));
+        }
+        let frictions = self.walls.iter().enumerate().map(|(i, w)| (format!("walls[{i}].friction"), w.friction()));
+        let frictions = frictions.chain(std::iter::once(("wall_friction".to_string(), Some(self.wall_friction))));
+        if let Some((key, mu)) =
+            frictions.into_iter().find_map(|(k, mu)| mu.filter(|mu| !(*mu >= 0.0)).map(|mu| (k, mu)))
+        {
+            return Err(SceneError::new(key, format!("must be a number >= 0 or \"inf\", got {mu}")));
+        }
         let value = serde_json::to_value(self).map_err(|e| SceneError::new("scene", e.to_string()))?;
         crate::schema::check(Self::schema(), &value).map_err(|e| SceneError::new(e.key, e.reason))?;
         self.layout_unchecked()?;
@@ -767,6 +787,12 @@ impl Scene {
         let boundary = match method {
             Method::Naive => Boundary::Naive(NaiveBoundary::new(&layout, &region, conditions)),
             Method::Augmented => {
+                if self.augmented.transfer == AugmentedTransfer::Paper && region.moves() {
+                    return Err(SceneError::new(
+                        "augmented.transfer",
+                        "\"paper\" holds particles against still walls only; moving walls need \"stable\"",
+                    ));
+                }
                 let (delta, spacing) = (self.augmented.delta, self.augmented.spacing);
                 Boundary::Augmented(
                     AugmentedGrid::new(&layout, &region, spacing * h, conditions, delta * h)

@@ -152,7 +152,8 @@ pub struct BoundaryPoint<const D: usize> {
     pub normals: [Vector<D>; 2],
     /// Index of the wall it was sampled on.
     pub wall: usize,
-    /// Velocity of the wall surface there (m/s); only its tangential part acts.
+    /// Velocity of the wall surface there (m/s): of a still wall only its tangential part acts, of a
+    /// moving one ([`WallContact::moving`]) all of it.
     pub velocity: Vector<D>,
 }
 

@@ -175,6 +175,15 @@ fn scenes_built_in_code_are_checked_too() {
     s.gravity[1] = f64::NAN as _;
     assert_eq!(s.validate().unwrap_err().to_string(), "gravity[1]: must be a finite number, got null");
     s.gravity[1] = -9.81;
+    // An optional number is null in JSON when absent: a NaN or an infinity given there is refused too.
+    s.time.dt = Some(f64::INFINITY as _);
+    assert_eq!(s.validate().unwrap_err().to_string(), "time.dt: must be a finite number, got inf");
+    s.time.dt = Some(1e-4);
+    s.wall_friction = f64::NAN as _;
+    assert!(s.validate().unwrap_err().to_string().starts_with("wall_friction: must be a number >= 0"));
+    s.wall_friction = f64::INFINITY as _;
+    assert!(s.validate().is_err(), "friction acts on separate walls only");
+    s.wall_friction = 0.0;
     s.augmented.delta = 1.5;
     let err = s.build(augmpm_core::Method::Augmented).err().unwrap();
     assert_eq!(err.to_string(), "augmented.delta: must be less than 1.5, got 1.5");

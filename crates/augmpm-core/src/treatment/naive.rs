@@ -12,7 +12,8 @@ pub struct WallNode<const D: usize> {
     pub node: usize,
     pub normal: Vector<D>,
     pub wall: usize,
-    /// Velocity of the wall surface there (m/s); only its tangential part acts.
+    /// Velocity of the wall surface there (m/s): of a still wall only its tangential part acts, of a
+    /// moving one all of it.
     pub velocity: Vector<D>,
 }
 

@@ -48,7 +48,8 @@ struct Row<const D: usize> {
 
 /// Corrects the grid fit `(v, c)` of a particle at `x` (its MLS inverse `minv` over the grid
 /// points, eq. (5); `h` the cell width (m), `dt` the step (s)) by the wall terms of `feet` under
-/// each wall's condition in `conditions`: sticky asks for the wall's tangential velocity (every component), slip for no normal velocity,
+/// each wall's condition in `conditions`: sticky asks for the wall's tangential velocity (every component; all of
+/// a moving wall's velocity), slip for no normal velocity (relative to a moving wall),
 /// separate for no normal velocity only where the fit moves into the wall. Returns how many
 /// scalar conditions acted.
 ///
@@ -103,11 +104,13 @@ pub fn fit_to_walls<const D: usize>(
         };
         let contact = conditions[foot.wall];
         if contact.moving {
-            // A wall moving as a rigid body: its conditions hold relative to its whole velocity.
-            let wall_n = n.dot(&foot.velocity);
+            // A wall moving as a rigid body: its conditions hold relative to its whole velocity. The normal
+            // velocity of a curved face is its centre's (a circle turning about its centre stays put; the
+            // chord of its surface points' paths is what `inward` corrects).
+            let wall_n = if foot.curvature > 0.0 { n.dot(&foot.centre_velocity) } else { n.dot(&foot.velocity) };
             match contact.condition {
                 WallCondition::Sticky => {
-                    let wall = foot.velocity - n * inward;
+                    let wall = foot.velocity + n * (wall_n - n.dot(&foot.velocity) - inward);
                     for k in 0..D {
                         let mut axis = Vector::<D>::zeros();
                         axis[k] = 1.0;
@@ -125,7 +128,7 @@ pub fn fit_to_walls<const D: usize>(
                         } else {
                             1.0 - contact.friction * pressed / speed
                         };
-                        let target = foot.velocity - n * inward + slide * kept;
+                        let target = foot.velocity + n * (wall_n - n.dot(&foot.velocity) - inward) + slide * kept;
                         for k in 0..D {
                             let mut axis = Vector::<D>::zeros();
                             axis[k] = 1.0;
