@@ -577,7 +577,7 @@ impl Scene {
         let frictions = self.walls.iter().enumerate().map(|(i, w)| (format!("walls[{i}].friction"), w.friction()));
         let frictions = frictions.chain(std::iter::once(("wall_friction".to_string(), Some(self.wall_friction))));
         if let Some((key, mu)) =
-            frictions.into_iter().find_map(|(k, mu)| mu.filter(|mu| !(*mu >= 0.0)).map(|mu| (k, mu)))
+            frictions.into_iter().find_map(|(k, mu)| mu.filter(|mu| mu.is_nan() || *mu < 0.0).map(|mu| (k, mu)))
         {
             return Err(SceneError::new(key, format!("must be a number >= 0 or \"inf\", got {mu}")));
         }
