@@ -559,8 +559,8 @@ where
         if moving {
             scratch.grid.resize(model.boundary.num_points(&model.layout));
         }
-        let (layout, frozen) = (&model.layout, &*model);
-        let model = frozen;
+        let model = &*model;
+        let layout = &model.layout;
         let left = |OutOfGrid(particle)| StepError::LeftGrid { step, particle, cause: likely_cause(model) };
         // 1. Bin the particles again if due; clear the grid where the last step left values.
         scratch.prepare_grid(layout, &state.particles.x, &mut state.binning).map_err(left)?;

@@ -89,6 +89,18 @@ fn tangential<const D: usize>(u: Vector<D>, [n0, n1]: &[Vector<D>; 2]) -> Vector
     }
 }
 
+/// The part of a slide of `speed` (m/s) along a wall that Coulomb friction `mu` keeps where the wall
+/// stopped a velocity `pressed` (m/s) into it: it shrinks by `mu · pressed`, and stops where it would
+/// reverse (always, for an infinite `mu`).
+#[inline]
+pub fn coulomb_kept(mu: Real, pressed: Real, speed: Real) -> Real {
+    if mu.is_infinite() || speed <= mu * pressed {
+        0.0
+    } else {
+        1.0 - mu * pressed / speed
+    }
+}
+
 /// How a wall acts on the material against it: its condition and, on a `separate` wall, its Coulomb
 /// friction coefficient μ (0: frictionless; infinite: no sliding while in contact, lift-off still free).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -133,13 +145,7 @@ impl WallContact {
         }
         let wall_t = reference;
         let slide = out - wall_t;
-        let speed = slide.norm();
-        let kept = if self.friction.is_infinite() || speed <= self.friction * pressed {
-            0.0
-        } else {
-            1.0 - self.friction * pressed / speed
-        };
-        wall_t + slide * kept
+        wall_t + slide * coulomb_kept(self.friction, pressed, slide.norm())
     }
 }
 

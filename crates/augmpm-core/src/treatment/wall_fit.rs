@@ -13,7 +13,7 @@
 use crate::geometry::{WallFeet, MAX_FEET};
 use crate::kernel::{bspline, MlsInverse};
 use crate::math::{Matrix, Real, Vector};
-use crate::wall::{WallCondition, WallContact};
+use crate::wall::{coulomb_kept, WallCondition, WallContact};
 
 /// Most wall terms of one particle: every foot, each with up to three rows (sticky in 3D).
 const MAX_ROWS: usize = MAX_FEET * 3;
@@ -111,29 +111,16 @@ pub fn fit_to_walls<const D: usize>(
             match contact.condition {
                 WallCondition::Sticky => {
                     let wall = foot.velocity + n * (wall_n - n.dot(&foot.velocity) - inward);
-                    for k in 0..D {
-                        let mut axis = Vector::<D>::zeros();
-                        axis[k] = 1.0;
-                        row(axis, wall[k]);
-                    }
+                    each_axis(&wall, &mut row);
                 }
                 WallCondition::Slip => row(n, wall_n - inward),
                 WallCondition::Separate => {
                     let pressed = n.dot(&fitted) - wall_n + inward;
                     if pressed > 0.0 && contact.friction > 0.0 {
                         let slide = fitted - n * n.dot(&fitted) - (foot.velocity - n * wall_n);
-                        let speed = slide.norm();
-                        let kept = if contact.friction.is_infinite() || speed <= contact.friction * pressed {
-                            0.0
-                        } else {
-                            1.0 - contact.friction * pressed / speed
-                        };
+                        let kept = coulomb_kept(contact.friction, pressed, slide.norm());
                         let target = foot.velocity + n * (wall_n - n.dot(&foot.velocity) - inward) + slide * kept;
-                        for k in 0..D {
-                            let mut axis = Vector::<D>::zeros();
-                            axis[k] = 1.0;
-                            row(axis, target[k]);
-                        }
+                        each_axis(&target, &mut row);
                     } else if pressed > 0.0 {
                         row(n, wall_n - inward)
                     }
@@ -145,11 +132,7 @@ pub fn fit_to_walls<const D: usize>(
             WallCondition::Sticky => {
                 // The wall's geometry is still: only its tangential surface velocity counts.
                 let wall = foot.velocity - n * (n.dot(&foot.velocity) + inward);
-                for k in 0..D {
-                    let mut axis = Vector::<D>::zeros();
-                    axis[k] = 1.0;
-                    row(axis, wall[k]);
-                }
+                each_axis(&wall, &mut row);
             }
             WallCondition::Slip => row(n, -inward),
             WallCondition::Separate if contact.friction > 0.0 => {
@@ -159,18 +142,9 @@ pub fn fit_to_walls<const D: usize>(
                 if pressed > 0.0 {
                     let wall_t = foot.velocity - n * n.dot(&foot.velocity);
                     let slide = fitted - n * n.dot(&fitted) - wall_t;
-                    let speed = slide.norm();
-                    let kept = if contact.friction.is_infinite() || speed <= contact.friction * pressed {
-                        0.0
-                    } else {
-                        1.0 - contact.friction * pressed / speed
-                    };
+                    let kept = coulomb_kept(contact.friction, pressed, slide.norm());
                     let target = wall_t + slide * kept - n * inward;
-                    for k in 0..D {
-                        let mut axis = Vector::<D>::zeros();
-                        axis[k] = 1.0;
-                        row(axis, target[k]);
-                    }
+                    each_axis(&target, &mut row);
                 }
             }
             WallCondition::Separate => {
@@ -182,6 +156,16 @@ pub fn fit_to_walls<const D: usize>(
     }
     apply_rows(&rows[..len], v, c);
     len
+}
+
+/// One wall row per axis, asking every component of the fit at the foot for `target`.
+#[inline]
+fn each_axis<const D: usize>(target: &Vector<D>, row: &mut impl FnMut(Vector<D>, Real)) {
+    for k in 0..D {
+        let mut axis = Vector::<D>::zeros();
+        axis[k] = 1.0;
+        row(axis, target[k]);
+    }
 }
 
 /// `x` in double precision, whatever [`Real`] is.
