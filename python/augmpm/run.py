@@ -1,7 +1,8 @@
 """A whole run: simulate a scene and write every output into a directory.
 
-Layout of DIR: ``scene.toml`` (the resolved scene), ``metrics.csv`` (one row
-per output frame), ``particles/frame_00000.npz`` (``x``, ``v``, ``body``),
+Layout of DIR: ``scene.toml`` (the resolved scene), ``metrics.csv`` (one row per
+output frame: :data:`METRIC_COLUMNS`, then the force on each wall, :func:`wall_force_columns`),
+``particles/frame_00000.npz`` (``x``, ``v``, ``body``),
 ``frames/frame_00000.png``, ``vtk/frame_00000.vtp`` with ``particles.pvd`` (and the walls: ``vtk/walls/walls.vtp``,
 or per frame ``vtk/walls/frame_00000.vtp`` with ``walls.pvd`` when walls move),
 ``animation.mp4`` (or ``.gif``), and ``checkpoint.npz`` (the state at the last
@@ -49,6 +50,16 @@ METRIC_COLUMNS = [
     "low_mass_nodes",
     "held_at_wall",
 ]
+
+
+def wall_force_columns(walls: int) -> list[str]:
+    """The columns of ``metrics.csv`` after :data:`METRIC_COLUMNS`: the mean force (N per metre of
+    depth) the material put on each of ``walls`` scene walls, then on the domain box, over the output
+    interval that ends at the row (0 in the first row)."""
+    names = [*map(str, range(walls)), "box"]
+    return [f"wall_force_{w}_{axis}" for w in names for axis in ("x", "y")]
+
+
 CHECKPOINT = "checkpoint.npz"
 #: Output frames between two checkpoints, unless the caller says otherwise.
 CHECKPOINT_EVERY = 10
@@ -192,6 +203,9 @@ class _Run:
         # (vtk/walls/walls.vtp).
         outlines = sim.wall_outlines()
         self.walls = any(moving for _, moving in outlines)
+        self.columns = METRIC_COLUMNS + wall_force_columns(len(outlines))
+        # The walls' impulses at the last row, from which the next row's forces are measured.
+        self.impulse_at = (sim.wall_impulse.copy(), sim.time)
         self.wall_frames = [(t, f.replace("vtk/", "vtk/walls/")) for t, f in self.vtk_frames] if self.walls else []
         if outlines and not self.walls:
             (out / "vtk" / "walls").mkdir(parents=True, exist_ok=True)
@@ -268,7 +282,12 @@ class _Run:
             moving = [outline for outline, moves in sim.wall_outlines() if moves]
             png = self.renderer.draw(x, body, sim.time, out / "frames" / f"{name}.png", walls=moving)
         m = sim.metrics()
-        self.pending.append(({k: m[k] for k in METRIC_COLUMNS}, png))
+        row = {k: m[k] for k in METRIC_COLUMNS}
+        impulse, (last, since) = sim.wall_impulse, self.impulse_at
+        force = -(impulse - last) / (sim.time - since) if sim.time > since else np.zeros_like(impulse)
+        row |= dict(zip(self.columns[len(METRIC_COLUMNS) :], map(float, force.ravel()), strict=True))
+        self.impulse_at = (impulse, sim.time)
+        self.pending.append((row, png))
         checkpoint = self.every and self.frame % self.every == 0
         # A checkpoint must not be ahead of the rows (and PNGs) it implies.
         self.commit(wait=bool(checkpoint))
@@ -288,7 +307,7 @@ class _Run:
             committed = True
         if committed or rewrite or not (self.out / "metrics.csv").exists():
             buf = io.StringIO()
-            writer = csv.DictWriter(buf, fieldnames=METRIC_COLUMNS, lineterminator="\r\n")
+            writer = csv.DictWriter(buf, fieldnames=self.columns, lineterminator="\r\n")
             writer.writeheader()
             writer.writerows(self.rows)
             write_text(self.out / "metrics.csv", buf.getvalue())

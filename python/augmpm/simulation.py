@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -167,6 +167,41 @@ class Simulation:
             raise _plain_error("points", f"must have shape (M, 2), got {points.shape}")
         return self._sim.wall_distance(points)
 
+    def set_wall_pose(
+        self,
+        wall: int,
+        position: Sequence[float],
+        angle: float = 0.0,
+        velocity: Sequence[float] = (0.0, 0.0),
+        angular_velocity: float = 0.0,
+    ) -> None:
+        """Puts scene wall ``wall`` (its index in ``walls``) where it is from now on, between steps: its
+        pivot (the ``motion``'s ``pivot``, else the wall's centre) displaced by ``position`` (m) from where
+        the scene draws it, turned by ``angle`` (rad, counter-clockwise) about it, and moving from now on
+        at ``velocity`` (m/s) and ``angular_velocity`` (rad/s) until set again; the wall's ``motion``, if
+        any, no longer acts. The pose is part of the state (:meth:`checkpoint`).
+
+        Raises :class:`augmpm.SceneError` naming the argument: a wall that does not exist, a non-finite
+        number, a pose more than one cell from where the wall is now, a velocity that moves it more than
+        a cell in a step, or a simulation that cannot follow moving walls.
+        """
+        if not isinstance(wall, (int, np.integer)) or isinstance(wall, bool) or wall < 0:
+            raise _plain_error("wall", f"must be a wall index (an integer ≥ 0), got {wall!r}")
+        self._sim.set_wall_pose(
+            int(wall),
+            _pair("position", position),
+            _number("angle", angle),
+            _pair("velocity", velocity),
+            _number("angular_velocity", angular_velocity),
+        )
+
+    @property
+    def wall_impulse(self) -> np.ndarray:
+        """The impulse (N·s per metre of depth) each scene wall has given the material since the start,
+        shape (walls + 1, 2), the domain box last. The force the material puts on a wall over an interval
+        is minus the change of its row divided by the interval (``metrics.csv``'s ``wall_force_<i>_x``)."""
+        return self._sim.wall_impulse
+
     def metrics(self) -> dict[str, float]:
         """``step, time, kinetic_energy, n_outside, max_penetration`` (cell widths), the augmented
         grid's counters ``ill_conditioned, low_mass_nodes, held_at_wall``, and ``max_cfl``: the
@@ -177,6 +212,25 @@ class Simulation:
 # Dtypes of the arrays of a checkpoint, from the engine's table of per-particle fields (see
 # Simulation.checkpoint); the rest are scalars.
 _STATE_DTYPES = {f["name"]: np.dtype(f["dtype"]) for f in _core.state_fields()}
+# The walls' part of the state: each wall's impulse so far, and the poses set by set_wall_pose.
+_STATE_DTYPES |= {"wall_impulse": np.dtype("float64"), "wall_pose": np.dtype("float64")}
+
+
+def _number(key: str, value: Any) -> float:
+    """``value`` as a finite float, or a SceneError naming ``key``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise _plain_error(key, f"must be a number, got {value!r}")
+    if not np.isfinite(value):
+        raise _plain_error(key, f"must be finite, got {value!r}")
+    return float(value)
+
+
+def _pair(key: str, value: Any) -> tuple[float, float]:
+    """``value`` as two finite floats, or a SceneError naming ``key``."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)) or len(value) != 2:
+        raise _plain_error(key, f"must be two numbers [x, y], got {value!r}")
+    return (_number(key, value[0]), _number(key, value[1]))
+
 
 THREADS_ENV = "AUGMPM_THREADS"
 MEMORY_ENV = "AUGMPM_MEMORY_LIMIT"

@@ -4,7 +4,7 @@
 //! normals point from the material into the wall.
 
 use crate::math::{Real, Vector};
-use crate::motion::{Motion, Pose};
+use crate::motion::{Motion, Pose, WallPose};
 use crate::wall::BoundaryPoint;
 use nalgebra::Vector2;
 
@@ -123,6 +123,21 @@ pub trait Region<const D: usize>: Send + Sync {
     /// Whether any wall moves.
     fn moves(&self) -> bool {
         false
+    }
+
+    /// Number of walls, the domain box not counted.
+    fn num_walls(&self) -> usize {
+        0
+    }
+
+    /// Sets the poses of the walls that `poses` names (wall, pose), sorted by wall; the others
+    /// move as their scene says. Takes effect at the next [`Region::set_time`].
+    fn set_poses(&mut self, _poses: &[(usize, WallPose)]) {}
+
+    /// How far (m) a point of wall `wall` jumps from where it is now to where `pose` puts it at
+    /// `pose.time`, and the top speed (m/s) of its points in that pose.
+    fn pose_change(&self, _wall: usize, _pose: &WallPose) -> (Real, Real) {
+        (0.0, 0.0)
     }
 
     /// Puts the moving walls where they are at time `t` (s), moving at their velocities over the
@@ -346,6 +361,8 @@ pub struct Walls2 {
     /// Each wall as the scene draws it, and how it moves (`None`: still).
     drawn: Vec<WallShape>,
     moves: Vec<Option<Motion>>,
+    /// Poses set from outside (`Simulation::set_wall_pose`), which take over from `moves`.
+    set: Vec<Option<WallPose>>,
     /// Each moving wall's pose now and at the end of the step, and the step (s).
     now: Vec<Pose>,
     next: Vec<Pose>,
@@ -363,8 +380,9 @@ impl Walls2 {
         ]);
         let motions = vec![SurfaceMotion::STILL; walls.len() + 1];
         let still: Vec<Pose> = walls.iter().map(|w| Pose::still(w.centre())).collect();
-        let moves = vec![None; walls.len()];
-        Self { drawn: walls.clone(), walls, domain_box, motions, moves, now: still.clone(), next: still, dt: 0.0 }
+        let (moves, set) = (vec![None; walls.len()], vec![None; walls.len()]);
+        let drawn = walls.clone();
+        Self { drawn, walls, domain_box, motions, moves, set, now: still.clone(), next: still, dt: 0.0 }
     }
 
     /// The same walls, wall `i` moving as `moves[i]` says (`None`: still), placed at time 0.
@@ -375,9 +393,22 @@ impl Walls2 {
         self
     }
 
-    /// Whether wall `wall` moves.
+    /// Whether wall `wall` moves (by its motion or a pose set from outside).
     pub fn is_moving(&self, wall: usize) -> bool {
-        self.moves.get(wall).is_some_and(Option::is_some)
+        self.moves.get(wall).is_some_and(Option::is_some) || self.set.get(wall).is_some_and(Option::is_some)
+    }
+
+    /// The point wall `wall` turns about, where the scene draws it: its motion's pivot, else its centre.
+    pub fn pivot(&self, wall: usize) -> Point {
+        self.moves[wall]
+            .as_ref()
+            .and_then(Motion::pivot)
+            .map_or_else(|| self.drawn[wall].centre(), |p| Point::new(p[0], p[1]))
+    }
+
+    /// The farthest distance (m) of wall `wall` from its pivot.
+    pub fn reach(&self, wall: usize) -> Real {
+        self.drawn[wall].reach_from(&self.pivot(wall))
     }
 
     /// The pose of wall `wall` now.
@@ -558,15 +589,44 @@ impl Region<2> for Walls2 {
     }
 
     fn moves(&self) -> bool {
-        self.moves.iter().any(Option::is_some)
+        self.moves.iter().any(Option::is_some) || self.set.iter().any(Option::is_some)
+    }
+
+    fn num_walls(&self) -> usize {
+        self.walls.len()
+    }
+
+    fn pose_change(&self, wall: usize, pose: &WallPose) -> (Real, Real) {
+        let (now, reach) = (self.now[wall], self.reach(wall));
+        let new = pose.pose(pose.time, self.pivot(wall));
+        ((new.offset - now.offset).norm() + (new.angle - now.angle).abs() * reach, pose.top_speed(reach))
+    }
+
+    fn set_poses(&mut self, poses: &[(usize, WallPose)]) {
+        self.set.fill(None);
+        for &(wall, pose) in poses {
+            self.set[wall] = Some(pose);
+        }
     }
 
     fn set_time(&mut self, t: Real, dt: Real) {
         self.dt = dt;
-        for (i, motion) in self.moves.iter().enumerate() {
-            if let Some(motion) = motion {
-                let centre = self.drawn[i].centre();
-                (self.now[i], self.next[i]) = (motion.pose(t, centre), motion.pose(t + dt, centre));
+        for i in 0..self.walls.len() {
+            let centre = self.drawn[i].centre();
+            let poses = match (&self.set[i], &self.moves[i]) {
+                (Some(set), _) => Some((set.pose(t, self.pivot(i)), set.pose(t + dt, self.pivot(i)))),
+                (None, Some(motion)) => Some((motion.pose(t, centre), motion.pose(t + dt, centre))),
+                (None, None) => {
+                    // A wall whose set pose was taken back (a restored state) returns to its drawing.
+                    if self.walls[i] != self.drawn[i] {
+                        self.walls[i] = self.drawn[i].clone();
+                        (self.now[i], self.next[i]) = (Pose::still(centre), Pose::still(centre));
+                    }
+                    None
+                }
+            };
+            if let Some(poses) = poses {
+                (self.now[i], self.next[i]) = poses;
                 self.walls[i] = self.drawn[i].placed(&self.now[i]);
                 if let WallShape::Circle(c, _) = &self.walls[i] {
                     self.motions[i].center = Some(c.center);

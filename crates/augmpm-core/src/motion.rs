@@ -110,9 +110,52 @@ impl Pose {
     }
 }
 
+/// A pose set from outside between steps (`Simulation::set_wall_pose`): at `time` (s) the wall's pivot
+/// is displaced by `position` (m) from where the scene draws it and the wall is turned by `angle`
+/// (rad, counter-clockwise); from then on it moves at `velocity` (m/s) and `angular_velocity`
+/// (rad/s) until set again.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WallPose {
+    pub time: Real,
+    pub position: [Real; 2],
+    pub angle: Real,
+    pub velocity: [Real; 2],
+    pub angular_velocity: Real,
+}
+
+impl WallPose {
+    /// Its numbers in the order of a checkpoint row (after the wall's index).
+    pub const NAMES: [&'static str; 7] =
+        ["time", "position_x", "position_y", "angle", "velocity_x", "velocity_y", "angular_velocity"];
+
+    /// The pose at time `t` (s) of a wall turning about `pivot`.
+    pub fn pose(&self, t: Real, pivot: Point) -> Pose {
+        let s = t - self.time;
+        let offset = Point::new(self.position[0] + self.velocity[0] * s, self.position[1] + self.velocity[1] * s);
+        Pose { pivot, offset, angle: self.angle + self.angular_velocity * s }
+    }
+
+    /// The largest speed (m/s) of a point at most `reach` (m) from the pivot.
+    pub fn top_speed(&self, reach: Real) -> Real {
+        Point::new(self.velocity[0], self.velocity[1]).norm() + self.angular_velocity.abs() * reach
+    }
+
+    /// Its numbers, in the order of [`WallPose::NAMES`].
+    pub fn to_row(&self) -> [Real; 7] {
+        let [px, py] = self.position;
+        let [vx, vy] = self.velocity;
+        [self.time, px, py, self.angle, vx, vy, self.angular_velocity]
+    }
+
+    /// The pose of a row of [`WallPose::to_row`].
+    pub fn from_row(r: [Real; 7]) -> Self {
+        Self { time: r[0], position: [r[1], r[2]], angle: r[3], velocity: [r[4], r[5]], angular_velocity: r[6] }
+    }
+}
+
 impl Motion {
     /// The pivot, if the scene gives one.
-    fn pivot(&self) -> Option<[Real; 2]> {
+    pub fn pivot(&self) -> Option<[Real; 2]> {
         match self {
             Motion::Constant { pivot, .. } | Motion::Oscillation { pivot, .. } | Motion::Keyframes { pivot, .. } => {
                 *pivot

@@ -6,11 +6,13 @@ use crate::geometry::Region;
 use crate::grid::{GridLayout, GridState, OutOfGrid};
 use crate::material::{ConstitutiveModel, Material};
 use crate::math::{Dim, DimOps, Real, Vector};
+use crate::motion::WallPose;
 use crate::parallel::Disjoint;
 use crate::particles::{Column, ColumnMut, Field, FieldKind, Particles};
 use crate::step::schedule::{Binning, Schedule};
 use crate::step::transfer::{self, G2pOutcome, GridDensity, Transfer};
 use crate::treatment::augmented::WallParticles;
+use crate::treatment::wall_fit::WallPush;
 use crate::treatment::{Boundary, WallTreatment};
 use std::time::Instant;
 
@@ -42,10 +44,15 @@ where
         self.materials.iter().any(ConstitutiveModel::<D>::smooths_volume_ratio)
     }
 
-    /// Puts moving walls where they are at time `t` (s), moving over the step that starts there, and
-    /// has the wall treatment follow them.
-    pub fn follow_walls(&mut self, t: Real) {
+    /// Puts moving walls where they are at time `t` (s), moving over the step that starts there (the
+    /// walls `poses` names as set there, the others as their scene says), and has the wall treatment
+    /// follow them.
+    pub fn follow_walls(&mut self, t: Real, poses: &[(usize, WallPose)]) {
+        self.region.set_poses(poses);
         self.region.set_time(t, self.dt);
+        for wall in 0..self.region.num_walls() {
+            self.boundary.set_moving(wall, self.region.is_moving(wall));
+        }
         self.boundary.follow(&self.layout, self.region.as_ref());
     }
 
@@ -130,6 +137,13 @@ pub struct State<const D: usize> {
     pub density: Vec<Real>,
     /// The block each particle was binned in, and how far the particles may have moved since.
     pub binning: Binning,
+    /// The impulse each wall has given the material since the start (N·s, per metre in 2D; the
+    /// domain box last): what the wall conditions took from or gave to the grid points and, at walls,
+    /// to the particles. Empty before a simulation sizes it.
+    pub wall_impulse: Vec<Vector<D>>,
+    /// The poses set by [`Simulation::set_wall_pose`], by wall (sorted); the other walls move as their
+    /// scene says.
+    pub wall_poses: Vec<(usize, WallPose)>,
 }
 
 /// The per-particle arrays of a [`State`] beyond its [`Particles`].
@@ -164,6 +178,8 @@ impl<const D: usize> State<D> {
             particles,
             density: vec![0.0; n],
             binning: Binning { bins: vec![0; n], drift: Real::INFINITY },
+            wall_impulse: Vec::new(),
+            wall_poses: Vec::new(),
         }
     }
 
@@ -231,6 +247,15 @@ impl<const D: usize> State<D> {
         if !(self.time.is_finite() && self.max_cfl.is_finite()) {
             return Err("the state holds non-finite values".to_string());
         }
+        if self.wall_impulse.iter().any(|i| !i.iter().all(|a| a.is_finite())) {
+            return Err("wall_impulse holds non-finite values".to_string());
+        }
+        if let Some((w, _)) = self.wall_poses.iter().find(|(_, p)| !p.to_row().iter().all(|a| a.is_finite())) {
+            return Err(format!("wall_pose of wall {w} holds non-finite values"));
+        }
+        if self.wall_poses.windows(2).any(|p| p[0].0 >= p[1].0) {
+            return Err("wall_pose rows must name each wall once, in increasing order".to_string());
+        }
         Ok(())
     }
 }
@@ -248,6 +273,8 @@ struct Scratch<const D: usize> {
     smooths: Vec<bool>,
     /// Particles whose MLS system sees a wall, with their inverses (augmented grid only).
     walls: WallParticles<D>,
+    /// The impulse each wall gave each particle of `walls` in G2P.
+    pushes: Vec<WallPush<D>>,
 }
 
 impl<const D: usize> Scratch<D> {
@@ -411,12 +438,15 @@ where
             },
             smooths: model.materials.iter().map(ConstitutiveModel::<D>::smooths_volume_ratio).collect(),
             walls: WallParticles::default(),
+            pushes: Vec::new(),
         };
         let mut model = model;
         if model.region.moves() {
-            model.follow_walls(0.0);
+            model.follow_walls(0.0, &[]);
         }
-        Self { model, state: State::new(particles), scratch, times: StageTimes::default(), pool: None, failed: None }
+        let mut state = State::new(particles);
+        state.wall_impulse = vec![Vector::<D>::zeros(); model.boundary.contacts().len()];
+        Self { model, state, scratch, times: StageTimes::default(), pool: None, failed: None }
     }
 
     /// The particles.
@@ -459,7 +489,7 @@ where
         let boundary = self.model.boundary.heap_bytes();
         MemoryUse {
             particles: self.state.heap_bytes(),
-            particle_scratch: s.schedule.particle_bytes() + s.walls.heap_bytes(),
+            particle_scratch: s.schedule.particle_bytes() + s.walls.heap_bytes() + b(&s.pushes),
             grid: s.grid.heap_bytes()
                 + b(&s.density_mass)
                 + b(&s.volume_ratio)
@@ -530,10 +560,26 @@ where
             Some(pool) => pool.install(|| run(&mut self.scratch.schedule)),
             None => run(&mut self.scratch.schedule),
         }?;
+        let walls = self.model.boundary.contacts().len();
+        if !state.wall_impulse.is_empty() && state.wall_impulse.len() != walls {
+            return Err(format!(
+                "wall_impulse has {} rows; the scene has {walls} walls (the domain box counted)",
+                state.wall_impulse.len()
+            ));
+        }
+        if let Some((w, _)) = state.wall_poses.iter().find(|(w, _)| *w + 1 >= walls) {
+            return Err(format!("wall_pose names wall {w}; the scene has {} walls", walls - 1));
+        }
+        let mut state = state;
+        if state.wall_impulse.is_empty() {
+            // A checkpoint written before walls' impulses were kept: none counted so far.
+            state.wall_impulse = vec![Vector::<D>::zeros(); walls];
+        }
+        let was_moving = self.model.region.moves();
         self.state = state;
         self.failed = None;
-        if self.model.region.moves() {
-            self.model.follow_walls(self.state.time);
+        if was_moving || !self.state.wall_poses.is_empty() {
+            self.model.follow_walls(self.state.time, &self.state.wall_poses);
             self.scratch.grid.resize(self.model.boundary.num_points(&self.model.layout));
         }
         // The grid is cleared only where the binning says particles were: start from a clean one.
@@ -573,7 +619,7 @@ where
             model.boundary.prepare::<Dim<D>>(layout, &state.particles.x, &mut scratch.walls).map_err(left)?;
         lap.add_to(&mut times.boundary);
 
-        let Scratch { schedule, grid, density_mass, volume_ratio, walls, .. } = scratch;
+        let Scratch { schedule, grid, density_mass, volume_ratio, walls, pushes, .. } = scratch;
         let t = Transfer { layout, schedule, augmented: model.boundary.transfer_view(walls) };
         let grid_density = (!density_mass.is_empty() || !volume_ratio.is_empty()).then(|| GridDensity {
             grid_mass: density_mass,
@@ -585,7 +631,7 @@ where
         lap.add_to(&mut times.p2g);
         // 5. Grid update (momentum → velocity, gravity), then the walls' conditions.
         state.low_mass_nodes += transfer::grid_velocity(&t, grid, &model.gravity, dt) as u64;
-        model.boundary.apply(&grid.mass, &mut grid.momentum);
+        model.boundary.apply(&grid.mass, &mut grid.momentum, &mut state.wall_impulse);
         lap.add_to(&mut times.grid);
         // 6. G2P, advection and the deformation update (only materials that smooth their J read
         // it back from the density).
@@ -598,14 +644,19 @@ where
             smoothed,
             &mut state.particles,
             dt,
+            pushes,
         );
+        // In the table's order (the particles'), so that the sums do not depend on the threads.
+        for (wall, impulse) in pushes.iter().flat_map(WallPush::iter) {
+            state.wall_impulse[wall] += impulse;
+        }
         lap.add_to(&mut times.g2p);
 
         state.advance_clock(step, dt, outcome.max_move / layout.h, outcome.held_at_wall as u64);
         let failed = failure(step, &outcome, state.max_cfl, || likely_cause(model));
         // 7. Moving walls go where they are at the end of the step; the treatment follows them.
         if moving {
-            self.model.follow_walls(self.state.time);
+            self.model.follow_walls(self.state.time, &self.state.wall_poses);
         }
         let state = &mut self.state;
         match failed {
@@ -616,6 +667,69 @@ where
             }
             None => Ok(()),
         }
+    }
+
+    /// Sets wall `wall` (in scene order) where it is now, at [`Simulation::time`]: its pivot displaced
+    /// by `pose.position` (m) from where the scene draws it, turned by `pose.angle` (rad), moving from
+    /// now on at `pose.velocity` (m/s) and `pose.angular_velocity` (rad/s) until set again (`pose.time`
+    /// is taken from the clock). The pose is part of the state (checkpoints keep it). Refused, changing
+    /// nothing, with the argument it names and the reason: a wall that does not exist, a non-finite
+    /// number, a wall point that would jump or move more than one cell in a step, or a simulation that
+    /// cannot follow moving walls (the paper's transfer, the corrected grid density).
+    pub fn set_wall_pose(&mut self, wall: usize, pose: WallPose) -> Result<(), (&'static str, String)> {
+        let walls = self.model.region.num_walls();
+        if wall >= walls {
+            return Err(("wall", format!("there is no wall {wall}; the scene has {walls} walls")));
+        }
+        let pose = WallPose { time: self.state.time, ..pose };
+        if let Some(k) = pose.to_row().iter().position(|a| !a.is_finite()) {
+            return Err((
+                ["time", "position", "position", "angle", "velocity", "velocity", "angular_velocity"][k],
+                "must be finite".into(),
+            ));
+        }
+        if let Boundary::Augmented(g) = &self.model.boundary {
+            if g.transfer == crate::treatment::augmented::AugmentedTransfer::Paper {
+                return Err(("wall", "augmented.transfer = \"paper\" holds particles against still walls only; moving walls need \"stable\"".into()));
+            }
+        }
+        if self.model.wall_fraction.is_some() {
+            return Err(("wall", "grid.density_wall_correction is computed once, for still walls".into()));
+        }
+        let (h, dt) = (self.model.layout.h, self.model.dt);
+        let (jump, speed) = self.model.region.pose_change(wall, &pose);
+        if jump > h {
+            return Err((
+                "position",
+                format!(
+                    "moves wall {wall} by up to {:.3} cells at once (at most one); move it over several steps",
+                    jump / h
+                ),
+            ));
+        }
+        if speed * dt > h {
+            return Err((
+                "velocity",
+                format!(
+                    "moves wall {wall} up to {:.3} cells in a step of {dt:e} s (at most one); lower the velocity or time.dt",
+                    speed * dt / h
+                ),
+            ));
+        }
+        let poses = &mut self.state.wall_poses;
+        match poses.binary_search_by_key(&wall, |&(w, _)| w) {
+            Ok(k) => poses[k].1 = pose,
+            Err(k) => poses.insert(k, (wall, pose)),
+        }
+        self.model.follow_walls(self.state.time, &self.state.wall_poses);
+        self.scratch.grid.resize(self.model.boundary.num_points(&self.model.layout));
+        Ok(())
+    }
+
+    /// The impulse each wall has given the material since the start (N·s, per metre in 2D), the
+    /// domain box last: minus what the material gave the wall.
+    pub fn wall_impulse(&self) -> &[Vector<D>] {
+        &self.state.wall_impulse
     }
 
     /// Density (kg/m³, or kg/m² in 2D) of each particle in the last step, as its material saw it

@@ -125,10 +125,10 @@ fn round_trip(s: &Setup, ps: &mut Particles<2>, walls_act: bool) -> GridState<2>
     let after_p2g = state.clone();
     grid_velocity(&t, &mut state, &Point::zeros(), 1e-3);
     if walls_act {
-        s.grid.apply(&state.mass, &mut state.momentum);
-        g2p(&t, &s.walls, &dust(), &state.momentum, &[], ps, 0.0);
+        s.grid.apply(&state.mass, &mut state.momentum, &mut vec![Vector2::zeros(); s.grid.walls.len()]);
+        g2p(&t, &s.walls, &dust(), &state.momentum, &[], ps, 0.0, &mut Vec::new());
     } else {
-        g2p(&t, &NoFeet(&s.walls), &dust(), &state.momentum, &[], ps, 0.0);
+        g2p(&t, &NoFeet(&s.walls), &dust(), &state.momentum, &[], ps, 0.0, &mut Vec::new());
     }
     after_p2g
 }
@@ -207,7 +207,7 @@ proptest! {
         let mut velocity: Vec<Point> = (0..s.layout.num_nodes()).map(|i| field(&s.layout.position(i))).collect();
         velocity.extend(s.grid.points.iter().map(|b| field(&b.x)));
         let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
-        g2p(&t, &s.walls, &dust(), &velocity, &[], &mut ps, 0.0);
+        g2p(&t, &s.walls, &dust(), &velocity, &[], &mut ps, 0.0, &mut Vec::new());
         for p in 0..ps.len() {
             prop_assert!((ps.v[p] - field(&ps.x[p])).norm() <= 1e-10, "v {} vs {}", ps.v[p], field(&ps.x[p]));
             prop_assert!((ps.c[p] - gradient).norm() <= 1e-8, "C {} vs {}", ps.c[p], gradient);
@@ -231,7 +231,7 @@ fn normal_velocity_vanishes_linearly_at_the_wall() {
         let s = setup(walls, cond, &ps, AugmentedTransfer::Stable);
         let velocity = vec![-normal_in; s.layout.num_nodes() + s.grid.points.len()];
         let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
-        g2p(&t, &s.walls, &dust(), &velocity, &[], &mut ps, 0.0);
+        g2p(&t, &s.walls, &dust(), &velocity, &[], &mut ps, 0.0, &mut Vec::new());
         let normal: Vec<Real> = ps.v.iter().map(|v| v.dot(&normal_in).abs()).collect();
         for k in 1..distances.len() {
             assert!(normal[k] <= normal[k - 1] / 5.0, "{cond:?}: |v·n| at d = {:?} h: {normal:?}", distances);

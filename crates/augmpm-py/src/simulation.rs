@@ -305,6 +305,41 @@ impl PySimulation {
         })
     }
 
+    /// Sets scene wall `wall` where it is now: its pivot displaced by `position` (m) from where the scene
+    /// draws it, turned by `angle` (rad, counter-clockwise), moving from now on at `velocity` (m/s) and
+    /// `angular_velocity` (rad/s) until set again. Raises SceneError naming the argument (a wall that
+    /// does not exist, a jump or a step of more than one cell, a non-finite number).
+    #[pyo3(signature = (wall, position, angle=0.0, velocity=(0.0, 0.0), angular_velocity=0.0))]
+    fn set_wall_pose(
+        &mut self,
+        wall: usize,
+        position: (f64, f64),
+        angle: f64,
+        velocity: (f64, f64),
+        angular_velocity: f64,
+    ) -> PyResult<()> {
+        self.guarded(|engine| {
+            with_sim!(engine, s, core => {
+                use core::math::Real;
+                let pose = core::motion::WallPose {
+                    time: 0.0,
+                    position: [position.0 as Real, position.1 as Real],
+                    angle: angle as Real,
+                    velocity: [velocity.0 as Real, velocity.1 as Real],
+                    angular_velocity: angular_velocity as Real,
+                };
+                s.set_wall_pose(wall, pose).map_err(|(key, reason)| scene_error(key, &reason))
+            })
+        })
+    }
+
+    /// The impulse (N·s per metre of depth) each scene wall has given the material since the start,
+    /// shape (walls + 1, 2), the domain box last; the force a wall receives is minus its rate.
+    #[getter]
+    fn wall_impulse<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        guard(|| with_sim!(&self.engine, s, core => vectors_to_array(py, s.wall_impulse())))
+    }
+
     /// Step, time, kinetic energy, particles outside the walls, the deepest penetration (cell widths),
     /// and the augmented grid's counts of ill-conditioned particle-steps and low-mass node-steps.
     fn metrics<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {

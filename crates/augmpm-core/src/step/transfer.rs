@@ -15,6 +15,7 @@ use crate::parallel::{Disjoint, MIN_BLOCKS, MIN_TASK};
 use crate::particles::Particles;
 use crate::step::schedule::{stencil_in_grid, Schedule};
 use crate::treatment::augmented::{AugmentedGrid, AugmentedTransfer, WallEntry, WallParticles};
+use crate::treatment::wall_fit::WallPush;
 use rayon::prelude::*;
 
 /// Scatters particle masses to the regular grid with the B-spline weights (never an augmented
@@ -286,7 +287,7 @@ pub fn p2g<const D: usize>(
                         }
                     });
                 }
-                Some((g, WallEntry { minv, near, total, tilt })) => {
+                Some((g, WallEntry { minv, near, total, tilt, .. })) => {
                     let mut force = stress * dt;
                     if g.transfer == AugmentedTransfer::Stable
                         && material.smooths_volume_ratio()
@@ -463,6 +464,9 @@ impl G2pSum {
 /// "stable"`) or the hold of particles past a wall ([`hold_at_wall`], `"paper"`), advection
 /// `x += dt v`, and the deformation update of its material (from the smoothed J of P2G, read back
 /// from `density`, for materials that smooth it; `density` may be empty when none does).
+/// The impulse each wall gave a particle of the wall table there by the wall fit (or the hold),
+/// `m_p Δv_p` (N·s), goes to `pushes`, one per entry of the table in its order.
+#[allow(clippy::too_many_arguments)]
 pub fn g2p<const D: usize>(
     t: &Transfer<'_, D>,
     region: &dyn Region<D>,
@@ -471,11 +475,15 @@ pub fn g2p<const D: usize>(
     density: &[Real],
     particles: &mut Particles<D>,
     dt: Real,
+    pushes: &mut Vec<WallPush<D>>,
 ) -> G2pOutcome
 where
     Dim<D>: DimOps<D>,
 {
     let layout = t.layout;
+    pushes.clear();
+    pushes.resize(t.augmented.map_or(0, |(_, table)| table.len()), WallPush::none());
+    let pushes = Disjoint::new(pushes);
     let (h, inv_h) = (layout.h, 1.0 / layout.h);
     let apic = 4.0 * inv_h * inv_h;
     let Particles { x, v, c, f, jp, material, mass, .. } = particles;
@@ -503,7 +511,8 @@ where
                     });
                     cn *= apic;
                 }
-                Some((g, WallEntry { minv, near, tilt, .. })) => {
+                Some((g, WallEntry { minv, near, tilt, slot, .. })) => {
+                    let mut push = WallPush::none();
                     g.for_each_near(layout, xp, near, |i, w, d| {
                         let w = tilt.weight(w, &d);
                         let vi = velocity[i];
@@ -513,7 +522,7 @@ where
                     });
                     match g.transfer {
                         AugmentedTransfer::Paper => {
-                            held = !g.surely_inside(layout, xp) && hold_at_wall(region, xp, &mut vn);
+                            held = !g.surely_inside(layout, xp) && hold_at_wall(region, xp, &mut vn, &mut push);
                         }
                         AugmentedTransfer::Stable => {
                             let mut feet = region.wall_feet(xp, WALL_REACH * h);
@@ -521,7 +530,7 @@ where
                             if !feet.is_empty() && !g.surely_inside(layout, xp) && region.distance(xp).distance >= 0.0 {
                                 feet.pin_past(xp);
                             }
-                            crate::treatment::wall_fit::fit_to_walls(
+                            push = crate::treatment::wall_fit::fit_to_walls(
                                 minv,
                                 xp,
                                 &feet,
@@ -532,6 +541,8 @@ where
                             );
                         }
                     }
+                    // SAFETY: each particle has its own entry in the table.
+                    unsafe { pushes.update(slot, |q| *q = push.times(mp)) };
                 }
             }
             *vp = vn;
@@ -574,11 +585,17 @@ pub const WALL_REACH: Real = 1.5;
 /// away) loses the part of its velocity that would carry it deeper, `v −= n·max(v·n, 0)`, whatever
 /// the wall's condition; moving back out is free. Returns whether it was held.
 #[inline]
-pub fn hold_at_wall<const D: usize>(region: &dyn Region<D>, x: &Vector<D>, v: &mut Vector<D>) -> bool {
+pub fn hold_at_wall<const D: usize>(
+    region: &dyn Region<D>,
+    x: &Vector<D>,
+    v: &mut Vector<D>,
+    push: &mut WallPush<D>,
+) -> bool {
     let d = region.distance(x);
     let into = v.dot(&d.normal);
     if d.distance > 0.0 && into > 0.0 {
         *v -= d.normal * into;
+        push.add(d.wall, -d.normal * into);
         true
     } else {
         false
@@ -650,7 +667,7 @@ mod tests {
         grid_velocity(&t, &mut grid, &Vector2::zeros(), 1e-3);
         let before = ps.clone();
         let walls = Walls2::new(vec![], Point::new(1.0, 1.0));
-        let outcome = g2p(&t, &walls, &dust(), &grid.momentum, &[], &mut ps, 0.0);
+        let outcome = g2p(&t, &walls, &dust(), &grid.momentum, &[], &mut ps, 0.0, &mut Vec::new());
         assert_eq!((outcome.held_at_wall, outcome.non_finite, outcome.left_grid), (0, None, None));
         assert_eq!(ps.x, before.x, "dt = 0 leaves positions");
         let p_back = ps.momentum();
@@ -726,13 +743,13 @@ mod tests {
     fn particles_past_a_wall_are_held() {
         let walls = Walls2::new(vec![], Point::new(1.0, 1.0)); // the domain box alone
         let mut v = Point::new(1.0, -2.0);
-        assert!(hold_at_wall(&walls, &Point::new(0.5, -0.01), &mut v));
+        assert!(hold_at_wall(&walls, &Point::new(0.5, -0.01), &mut v, &mut WallPush::none()));
         assert_eq!(v, Point::new(1.0, 0.0));
         let mut v = Point::new(1.0, 2.0);
-        assert!(!hold_at_wall(&walls, &Point::new(0.5, -0.01), &mut v));
+        assert!(!hold_at_wall(&walls, &Point::new(0.5, -0.01), &mut v, &mut WallPush::none()));
         assert_eq!(v, Point::new(1.0, 2.0));
         let mut v = Point::new(1.0, -2.0);
-        assert!(!hold_at_wall(&walls, &Point::new(0.5, 0.2), &mut v));
+        assert!(!hold_at_wall(&walls, &Point::new(0.5, 0.2), &mut v, &mut WallPush::none()));
         assert_eq!(v, Point::new(1.0, -2.0));
     }
 

@@ -506,15 +506,21 @@ impl<const D: usize> AugmentedGrid<D> {
         Ok((u, grad, kind))
     }
 
-    /// Wall conditions at the boundary points (grid points `num_nodes..`), after momentum → velocity.
-    pub fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>]) {
+    /// Wall conditions at the boundary points (grid points `num_nodes..`), after momentum → velocity;
+    /// each wall's impulse on the grid there, `m_b (v_b' − v_b)` (N·s), is added to `impulse[wall]`.
+    pub fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>], impulse: &mut [Vector<D>]) {
         let base = self.num_nodes();
         for (b, p) in self.points.iter().enumerate() {
             let i = base + b;
             let condition = self.walls[p.wall];
-            // A point no particle gave mass to moves with the wall.
-            let v = if mass[i] != 0.0 { velocity[i] } else { p.velocity };
-            velocity[i] = condition.apply_at(v, &p.normals, &p.velocity);
+            // A point no particle gave mass to moves with the wall (and carries no momentum).
+            if mass[i] != 0.0 {
+                let before = velocity[i];
+                velocity[i] = condition.apply_at(before, &p.normals, &p.velocity);
+                impulse[p.wall] += (velocity[i] - before) * mass[i];
+            } else {
+                velocity[i] = condition.apply_at(p.velocity, &p.normals, &p.velocity);
+            }
         }
     }
 }
@@ -547,6 +553,8 @@ pub struct WallEntry<'a, const D: usize> {
     pub total: Real,
     /// Its reweighting ([`Tilt::none`] for the paper's transfer).
     pub tilt: Tilt<D>,
+    /// Its index in the table (entries are in particle order).
+    pub slot: usize,
 }
 
 impl<const D: usize> WallParticles<D> {
@@ -615,6 +623,7 @@ impl<const D: usize> WallParticles<D> {
             near: &self.near[s],
             total: self.total[s],
             tilt: self.tilt[s],
+            slot: s,
         })
     }
 

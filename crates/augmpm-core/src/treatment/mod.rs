@@ -12,7 +12,7 @@ use crate::geometry::Region;
 use crate::grid::{GridLayout, OutOfGrid};
 use crate::kernel::{MlsInverse, MlsKind, Stencil};
 use crate::math::{DimOps, Real, Vector};
-use crate::wall::BoundaryPoint;
+use crate::wall::{BoundaryPoint, WallContact};
 use augmented::{AugmentedGrid, WallParticles};
 use naive::NaiveBoundary;
 use schemars::JsonSchema;
@@ -47,8 +47,18 @@ pub trait WallTreatment<const D: usize> {
         table: &mut WallParticles<D>,
     ) -> Result<u64, OutOfGrid>;
 
-    /// Applies the walls' conditions at the grid points they act on (velocities, after the grid update).
-    fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>]);
+    /// Applies the walls' conditions at the grid points they act on (velocities, after the grid update),
+    /// adding the impulse each wall gives the grid's material there, `m_i (v_i' − v_i)` (N·s, per metre
+    /// in 2D), to `impulse[wall]` (one per wall, the domain box last). P2G and the grid update conserve
+    /// momentum, so these are the walls' impulses on the material (with the augmented grid's G2P wall
+    /// fit, counted in G2P).
+    fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>], impulse: &mut [Vector<D>]);
+
+    /// How each wall acts (condition, friction, whether it moves), the domain box last.
+    fn contacts(&self) -> &[WallContact];
+
+    /// Says whether wall `wall` moves (its whole velocity then counts in its condition).
+    fn set_moving(&mut self, wall: usize, moving: bool);
 
     /// Follows walls that moved: what the treatment keeps of them is built again where `region`'s
     /// walls are now (the wall-side nodes; the boundary points, included nodes and point index).
@@ -93,8 +103,14 @@ impl<const D: usize> WallTreatment<D> for NaiveBoundary<D> {
     ) -> Result<u64, OutOfGrid> {
         Ok(0)
     }
-    fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>]) {
-        NaiveBoundary::apply(self, mass, velocity)
+    fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>], impulse: &mut [Vector<D>]) {
+        NaiveBoundary::apply(self, mass, velocity, impulse)
+    }
+    fn contacts(&self) -> &[WallContact] {
+        &self.walls
+    }
+    fn set_moving(&mut self, wall: usize, moving: bool) {
+        self.walls[wall].moving = moving;
     }
     fn follow(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>) {
         self.classify(layout, region)
@@ -149,8 +165,14 @@ impl<const D: usize> WallTreatment<D> for AugmentedGrid<D> {
     ) -> Result<u64, OutOfGrid> {
         table.update::<Ops>(self, layout, x)
     }
-    fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>]) {
-        AugmentedGrid::apply(self, mass, velocity)
+    fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>], impulse: &mut [Vector<D>]) {
+        AugmentedGrid::apply(self, mass, velocity, impulse)
+    }
+    fn contacts(&self) -> &[WallContact] {
+        &self.walls
+    }
+    fn set_moving(&mut self, wall: usize, moving: bool) {
+        self.walls[wall].moving = moving;
     }
     fn follow(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>) {
         AugmentedGrid::follow(self, layout, region)
@@ -212,8 +234,14 @@ impl<const D: usize> WallTreatment<D> for Boundary<D> {
     ) -> Result<u64, OutOfGrid> {
         dispatch!(self, t => t.prepare::<Ops>(layout, x, table))
     }
-    fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>]) {
-        dispatch!(self, t => WallTreatment::apply(t, mass, velocity))
+    fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>], impulse: &mut [Vector<D>]) {
+        dispatch!(self, t => WallTreatment::apply(t, mass, velocity, impulse))
+    }
+    fn contacts(&self) -> &[WallContact] {
+        dispatch!(self, t => t.contacts())
+    }
+    fn set_moving(&mut self, wall: usize, moving: bool) {
+        dispatch!(self, t => t.set_moving(wall, moving))
     }
     fn follow(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>) {
         dispatch!(self, t => WallTreatment::follow(t, layout, region))

@@ -56,11 +56,15 @@ impl<const D: usize> NaiveBoundary<D> {
         crate::math::heap_bytes(&self.nodes) + crate::math::heap_bytes(&self.walls)
     }
 
-    /// Projects the grid velocities of wall nodes (after momentum → velocity).
-    pub fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>]) {
+    /// Projects the grid velocities of wall nodes (after momentum → velocity), adding each wall's
+    /// impulse on the material, `m_i (v_i' − v_i)` (N·s), to `impulse[wall]`.
+    pub fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>], impulse: &mut [Vector<D>]) {
         for w in &self.nodes {
-            if mass[w.node] > 0.0 {
-                velocity[w.node] = self.walls[w.wall].apply(velocity[w.node], &w.normal, &w.velocity);
+            let m = mass[w.node];
+            if m > 0.0 {
+                let before = velocity[w.node];
+                velocity[w.node] = self.walls[w.wall].apply(before, &w.normal, &w.velocity);
+                impulse[w.wall] += (velocity[w.node] - before) * m;
             }
         }
     }

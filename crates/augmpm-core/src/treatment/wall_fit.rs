@@ -18,6 +18,46 @@ use crate::wall::{coulomb_kept, WallCondition, WallContact};
 /// Most wall terms of one particle: every foot, each with up to three rows (sticky in 3D).
 const MAX_ROWS: usize = MAX_FEET * 3;
 
+/// The velocity change (m/s) each wall gave one particle in G2P, by wall (at most one per foot):
+/// times the particle's mass, the impulse of the wall on it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WallPush<const D: usize> {
+    wall: [u32; MAX_FEET],
+    dv: [Vector<D>; MAX_FEET],
+}
+
+impl<const D: usize> WallPush<D> {
+    const EMPTY: u32 = u32::MAX;
+
+    /// No wall pushed.
+    pub fn none() -> Self {
+        Self { wall: [Self::EMPTY; MAX_FEET], dv: [Vector::<D>::zeros(); MAX_FEET] }
+    }
+
+    /// Adds `dv` (m/s) to what wall `wall` gave.
+    pub fn add(&mut self, wall: usize, dv: Vector<D>) {
+        let slot = self.wall.iter().position(|&w| w == wall as u32 || w == Self::EMPTY);
+        // There are at most MAX_FEET walls in reach of a particle: a slot is always left.
+        if let Some(k) = slot {
+            self.wall[k] = wall as u32;
+            self.dv[k] += dv;
+        }
+    }
+
+    /// The same, each velocity change times `m`.
+    pub fn times(mut self, m: Real) -> Self {
+        for dv in &mut self.dv {
+            *dv *= m;
+        }
+        self
+    }
+
+    /// Each wall that pushed and the velocity change it gave.
+    pub fn iter(&self) -> impl Iterator<Item = (usize, Vector<D>)> + '_ {
+        self.wall.iter().zip(&self.dv).take_while(|(&w, _)| w != Self::EMPTY).map(|(&w, &dv)| (w as usize, dv))
+    }
+}
+
 /// The inverse `r² / N(r)` of a wall term's weight `ω = N(r) / r²` at distance `r` (cell widths)
 /// from its face: the quadratic B-spline over the squared distance. Zero on the face, where the fit
 /// meets the wall value exactly; infinite beyond the support (r ≥ 1.5), where the term is dropped.
@@ -35,6 +75,8 @@ pub fn inverse_wall_weight(r: Real) -> Real {
 /// One scalar wall condition on the fit: `n · u(x_p + d) = target`, with weight `1 / inv_weight`.
 #[derive(Clone, Copy, Debug)]
 struct Row<const D: usize> {
+    /// The wall of the foot it belongs to.
+    wall: usize,
     n: Vector<D>,
     d: Vector<D>,
     /// `M⁻¹ [1, d]`: its first entry and the rest (the shape function of the foot, eq. (4)).
@@ -50,8 +92,8 @@ struct Row<const D: usize> {
 /// points, eq. (5); `h` the cell width (m), `dt` the step (s)) by the wall terms of `feet` under
 /// each wall's condition in `conditions`: sticky asks for the wall's tangential velocity (every component; all of
 /// a moving wall's velocity), slip for no normal velocity (relative to a moving wall),
-/// separate for no normal velocity only where the fit moves into the wall. Returns how many
-/// scalar conditions acted.
+/// separate for no normal velocity only where the fit moves into the wall. Returns the change of `v`
+/// each wall made.
 ///
 /// On a face that curves around the material (a circular container), a particle that moves along
 /// it in a straight step of `dt` (s) would end `√(ρ² + |v_t dt|²) − ρ` farther out (ρ its distance
@@ -71,9 +113,9 @@ pub fn fit_to_walls<const D: usize>(
     (h, dt): (Real, Real),
     v: &mut Vector<D>,
     c: &mut Matrix<D>,
-) -> usize {
+) -> WallPush<D> {
     let zero = Vector::<D>::zeros();
-    let mut rows = [Row { n: zero, d: zero, q0: 0.0, q: zero, inv_weight: 1.0, residual: 0.0 }; MAX_ROWS];
+    let mut rows = [Row { wall: 0, n: zero, d: zero, q0: 0.0, q: zero, inv_weight: 1.0, residual: 0.0 }; MAX_ROWS];
     let mut len = 0;
     for foot in feet.iter() {
         let d = foot.x - x;
@@ -98,7 +140,7 @@ pub fn fit_to_walls<const D: usize>(
         };
         let mut row = |n: Vector<D>, target: Real| {
             if len < MAX_ROWS {
-                rows[len] = Row { n, d, q0, q, inv_weight, residual: target - n.dot(&fitted) };
+                rows[len] = Row { wall: foot.wall, n, d, q0, q, inv_weight, residual: target - n.dot(&fitted) };
                 len += 1;
             }
         };
@@ -154,8 +196,9 @@ pub fn fit_to_walls<const D: usize>(
             }
         }
     }
-    apply_rows(&rows[..len], v, c);
-    len
+    let mut push = WallPush::none();
+    apply_rows(&rows[..len], v, c, &mut push);
+    push
 }
 
 /// One wall row per axis, asking every component of the fit at the foot for `target`.
@@ -176,8 +219,9 @@ fn wide(x: Real) -> f64 {
 }
 
 /// Solves `(Ω⁻¹ + Uᵀ A⁻¹ U) λ = residual` in f64 (at most [`MAX_ROWS`] unknowns, Gaussian
-/// elimination with partial pivoting) and adds `Σ_j λ_j n_j [q0_j, q_jᵀ]` to the fit.
-fn apply_rows<const D: usize>(rows: &[Row<D>], v: &mut Vector<D>, c: &mut Matrix<D>) {
+/// elimination with partial pivoting) and adds `Σ_j λ_j n_j [q0_j, q_jᵀ]` to the fit, each row's part of
+/// `v` to its wall's `push`.
+fn apply_rows<const D: usize>(rows: &[Row<D>], v: &mut Vector<D>, c: &mut Matrix<D>, push: &mut WallPush<D>) {
     let m = rows.len();
     if m == 0 {
         return;
@@ -220,7 +264,9 @@ fn apply_rows<const D: usize>(rows: &[Row<D>], v: &mut Vector<D>, c: &mut Matrix
     }
     for (row, &l) in rows.iter().zip(&lambda) {
         let l = l as Real;
-        *v += row.n * (l * row.q0);
+        let dv = row.n * (l * row.q0);
+        *v += dv;
+        push.add(row.wall, dv);
         *c += row.n * (row.q * l).transpose();
     }
 }
