@@ -9,7 +9,14 @@ import pytest
 import augmpm
 from augmpm.render import FrameRenderer
 
-MOVING = ["moving/shaken_tank", "moving/turning_box", "moving/keyframed_tank", "moving/stirred_tank", "moving/piston"]
+MOVING = [
+    "moving/shaken_tank",
+    "moving/turning_box",
+    "moving/keyframed_tank",
+    "moving/stirred_tank",
+    "moving/piston",
+    "moving/plate_in_snow",
+]
 
 
 @pytest.mark.parametrize("name", MOVING)

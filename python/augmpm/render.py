@@ -17,6 +17,7 @@ as a whole when one of its threads loses its core.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 import struct
 import sys
@@ -34,7 +35,7 @@ from matplotlib.patches import Circle, PathPatch, Polygon, Rectangle
 from PIL import Image, ImageDraw, ImageFont
 
 from augmpm.files import write_bytes
-from augmpm.scene import CircleWall, PolygonWall, Scene
+from augmpm.scene import CircleWall, PolygonWall, PolylineWall, Scene
 
 # tab10, as 8-bit RGB; particles of body b take colour b mod 10.
 COLOURS = np.round(np.array(matplotlib.colormaps["tab10"].colors) * 255).astype(np.uint8)
@@ -61,8 +62,12 @@ def image_size(scene: Scene, size_px: int = 640) -> tuple[int, int]:
     return size_px, max(16, round(size_px * ly / lx / 16) * 16)
 
 
-def _draw_background(scene: Scene, size_px: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The walls drawn by matplotlib: RGB image (H, W, 3) and the world → display map (px per m, offset px)."""
+def _draw_background(
+    scene: Scene, size_px: int, outlines: list[np.ndarray] | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The walls drawn by matplotlib: RGB image (H, W, 3) and the world → display map (px per m, offset px).
+    A polyline wall is drawn from its outline in ``outlines`` (one per wall, from
+    ``Simulation.wall_outlines``), else as its segments and round joints."""
     lx, ly = scene.grid.domain
     width, height = image_size(scene, size_px)
     fig = Figure(figsize=(width / _DPI, height / _DPI), dpi=_DPI)
@@ -74,7 +79,7 @@ def _draw_background(scene: Scene, size_px: int) -> tuple[np.ndarray, np.ndarray
     ax.set_axis_off()
     wall_style = {"facecolor": "0.85", "edgecolor": "0.2", "linewidth": 1.5}
     ax.add_patch(Rectangle((0, 0), lx, ly, fill=False, edgecolor="0.2", linewidth=2))
-    for w in scene.walls:
+    for i, w in enumerate(scene.walls):
         if w.motion is not None:
             continue  # a moving wall is drawn on each frame, where it is then
         if isinstance(w, PolygonWall) and w.side == "outside":
@@ -88,6 +93,16 @@ def _draw_background(scene: Scene, size_px: int) -> tuple[np.ndarray, np.ndarray
             ax.add_patch(PathPatch(path, facecolor="0.85", edgecolor="none", zorder=0))
         elif isinstance(w, CircleWall):
             ax.add_patch(Circle(w.center, w.radius, fill=(w.side == "outside"), **wall_style))
+        elif isinstance(w, PolylineWall) and outlines is not None:
+            ax.add_patch(Polygon(np.asarray(outlines[i]), closed=True, **wall_style))
+        elif isinstance(w, PolylineWall):
+            fill = {"facecolor": "0.85", "edgecolor": "none"}
+            half, points = 0.5 * w.thickness, np.asarray(w.vertices, dtype=float)
+            for a, b in itertools.pairwise(points):
+                n = np.array([a[1] - b[1], b[0] - a[0]]) / np.hypot(*(b - a)) * half
+                ax.add_patch(Polygon(np.array([a + n, b + n, b - n, a - n]), closed=True, **fill))
+            for p in points:
+                ax.add_patch(Circle(p, half, **fill))
     canvas.draw()
     rgb = np.asarray(canvas.buffer_rgba())[..., :3].copy()
     if rgb.shape != (height, width, 3):
@@ -184,11 +199,18 @@ class FrameRenderer:
     """
 
     def __init__(
-        self, scene: Scene, title: str = "", size_px: int = 640, animation: Path | None = None, fps: int = 20
+        self,
+        scene: Scene,
+        title: str = "",
+        size_px: int = 640,
+        animation: Path | None = None,
+        fps: int = 20,
+        outlines: list[np.ndarray] | None = None,
     ) -> None:
-        self.background, self._scale, self._offset = _draw_background(scene, size_px)
-        # Which moving walls are obstacles (material outside them): drawn filled, as the still ones.
-        self._filled = [w.side == "outside" for w in scene.walls if w.motion is not None]
+        self.background, self._scale, self._offset = _draw_background(scene, size_px, outlines)
+        # Which moving walls are obstacles (material outside them; a polyline always): drawn filled, as the
+        # still ones.
+        self._filled = [getattr(w, "side", "outside") == "outside" for w in scene.walls if w.motion is not None]
         self.title = title
         lx, ly = scene.grid.domain
         # The caption's top-left corner at (0.01 lx, 0.99 ly), as before; 14 px is 10 pt at 100 dpi.

@@ -222,7 +222,8 @@ class _Run:
             # Frames go to the animation as they are drawn, so the PNGs are not read back at the end;
             # a resumed run encodes it from the PNGs instead, as the earlier frames are not in memory.
             stream = out / f"animation.{animation}" if animation and not self.resumed else None
-            renderer = FrameRenderer(scene, title=f"{scene.name} ({sim.method})", animation=stream)
+            outlines = [outline for outline, _ in sim.wall_outlines()]
+            renderer = FrameRenderer(scene, title=f"{scene.name} ({sim.method})", animation=stream, outlines=outlines)
         self.renderer = renderer
         error, failure = None, None
         start = wallclock.perf_counter()

@@ -259,7 +259,7 @@ def _model(name: str, schema: dict[str, Any], shared: dict[str, Any] | None = No
 
 Scene = _model("Scene", SCHEMA)
 Grid, Time, Augmented, Seeding = (_MODELS[n] for n in ("Grid", "Time", "Augmented", "Seeding"))
-PolygonWall, CircleWall = _MODELS["PolygonWall"], _MODELS["CircleWall"]
+PolygonWall, CircleWall, PolylineWall = _MODELS["PolygonWall"], _MODELS["CircleWall"], _MODELS["PolylineWall"]
 PolygonBody, BoxBody, CircleBody = _MODELS["PolygonBody"], _MODELS["BoxBody"], _MODELS["CircleBody"]
 Fluid, Elastic, Stvk, Snow = (_MODELS[n] for n in ("Fluid", "Elastic", "Stvk", "Snow"))
 #: How walls act on the grid, by name.

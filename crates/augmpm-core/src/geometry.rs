@@ -303,6 +303,89 @@ impl Circle {
     }
 }
 
+/// An open polyline drawn `2·half` (m) wide: the points within `half` of it, with round ends and
+/// joints. Material lies all around it: a plate, a ramp, a paddle.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Stroke {
+    /// The centreline, at least two distinct consecutive points.
+    pub vertices: Vec<Point>,
+    pub half: Real,
+}
+
+impl Stroke {
+    /// Where `p`'s perpendicular lands on segment `k`, as a fraction of its length.
+    fn along(&self, k: usize, p: &Point) -> Real {
+        let (a, b) = (self.vertices[k], self.vertices[k + 1]);
+        (p - a).dot(&(b - a)) / (b - a).norm_squared()
+    }
+
+    /// The unit normal of segment `k`, to its left.
+    fn left(&self, k: usize) -> Point {
+        let e = (self.vertices[k + 1] - self.vertices[k]).normalize();
+        Point::new(-e.y, e.x)
+    }
+
+    /// Signed distance to the stroke's surface, negative inside it, and the outward normal there
+    /// (from the centreline towards `p`).
+    pub fn signed_distance(&self, p: &Point) -> (Real, Point) {
+        let (mut best, mut normal) = (Real::INFINITY, self.left(0));
+        for k in 0..self.vertices.len() - 1 {
+            let a = self.vertices[k];
+            let q = a + (self.vertices[k + 1] - a) * self.along(k, p).clamp(0.0, 1.0);
+            let r = p - q;
+            let d = r.norm();
+            if d < best {
+                best = d;
+                normal = if d > 1e-300 { r / d } else { self.left(k) };
+            }
+        }
+        (best - self.half, normal)
+    }
+
+    /// Points along the stroke's surface at most `spacing` (m) apart, with the outward normal at each,
+    /// walked clockwise around it: the left side forward, the round end, the right side back, the round
+    /// start. Where the centreline turns, the outer side gets an arc and the inner side's offset lines
+    /// cross (their points past the crossing lie inside the stroke).
+    pub fn surface(&self, spacing: Real) -> Vec<(Point, Point)> {
+        let m = self.vertices.len();
+        let mut out = Vec::new();
+        let side = |from: Point, to: Point, n: Point, out: &mut Vec<(Point, Point)>| {
+            let parts = ((to - from).norm() / spacing).ceil().max(1.0) as usize;
+            out.extend((0..parts).map(|k| (from + (to - from) * (k as Real / parts as Real), n)));
+        };
+        // The arc about `c` from outward normal `n`, turning clockwise by `sweep` (rad), its end left out.
+        let arc = |c: Point, n: Point, sweep: Real, out: &mut Vec<(Point, Point)>| {
+            let parts = (sweep * self.half / spacing).ceil() as usize;
+            out.extend((0..parts).map(|k| {
+                let (s, co) = (-sweep * k as Real / parts as Real).sin_cos();
+                let r = Point::new(co * n.x - s * n.y, s * n.x + co * n.y);
+                (c + r * self.half, r)
+            }));
+        };
+        // The clockwise turn (rad, ≥ 0) from direction `a` to direction `b`; 0 for a left turn.
+        let right_turn = |a: Point, b: Point| (-a.perp(&b).atan2(a.dot(&b))).max(0.0);
+        let dir = |k: usize| (self.vertices[k + 1] - self.vertices[k]).normalize();
+        let pi = crate::math::PI;
+        for k in 0..m - 1 {
+            let n = self.left(k);
+            side(self.vertices[k] + n * self.half, self.vertices[k + 1] + n * self.half, n, &mut out);
+            if k + 2 < m {
+                arc(self.vertices[k + 1], n, right_turn(dir(k), dir(k + 1)), &mut out);
+            }
+        }
+        arc(self.vertices[m - 1], self.left(m - 2), pi, &mut out);
+        for k in (0..m - 1).rev() {
+            let n = -self.left(k);
+            side(self.vertices[k + 1] + n * self.half, self.vertices[k] + n * self.half, n, &mut out);
+            if k > 0 {
+                arc(self.vertices[k], n, right_turn(-dir(k), -dir(k - 1)), &mut out);
+            }
+        }
+        arc(self.vertices[0], -self.left(0), pi, &mut out);
+        out
+    }
+}
+
 /// How the surface of one wall moves (its geometry stays still).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SurfaceMotion {
@@ -346,6 +429,8 @@ pub enum WallShape {
     Obstacle(Polygon),
     /// A circle, material on the given side.
     Circle(Circle, Side),
+    /// An open polyline with a width, material around it.
+    Stroke(Stroke),
 }
 
 /// The material region of a 2D scene: inside the domain box, inside the union
@@ -468,6 +553,7 @@ impl WallShape {
                 p.vertices.iter().sum::<Point>() / p.vertices.len() as Real
             }
             WallShape::Circle(c, _) => c.center,
+            WallShape::Stroke(s) => s.vertices.iter().sum::<Point>() / s.vertices.len() as Real,
         }
     }
 
@@ -483,6 +569,9 @@ impl WallShape {
             WallShape::Circle(c, side) => {
                 WallShape::Circle(Circle { center: pose.place(&c.center), radius: c.radius }, *side)
             }
+            WallShape::Stroke(s) => {
+                WallShape::Stroke(Stroke { vertices: s.vertices.iter().map(|v| pose.place(v)).collect(), half: s.half })
+            }
         }
     }
 
@@ -493,6 +582,7 @@ impl WallShape {
                 p.vertices.iter().map(|v| (v - pivot).norm()).fold(0.0, Real::max)
             }
             WallShape::Circle(c, _) => (c.center - pivot).norm() + c.radius,
+            WallShape::Stroke(s) => s.vertices.iter().map(|v| (v - pivot).norm()).fold(0.0, Real::max) + s.half,
         }
     }
 }
@@ -507,7 +597,7 @@ impl Walls2 {
             .filter_map(|(i, w)| match w {
                 WallShape::Polygon(p) => Some((i, p, false)),
                 WallShape::Obstacle(p) => Some((i, p, true)),
-                WallShape::Circle(..) => None,
+                WallShape::Circle(..) | WallShape::Stroke(_) => None,
             })
             .chain(std::iter::once((self.box_index(), &self.domain_box, false)))
     }
@@ -537,6 +627,9 @@ impl Walls2 {
             }
         }
         for (wall, w) in self.walls.iter().enumerate() {
+            if let WallShape::Stroke(s) = w {
+                out.extend(s.surface(h).into_iter().map(|(x, n)| BoundaryPoint::new(x, -n, -n, wall)));
+            }
             if let WallShape::Circle(c, side) = w {
                 let parts = (2.0 * crate::math::PI * c.radius / h).ceil().max(8.0) as usize;
                 for k in 0..parts {
@@ -568,6 +661,10 @@ impl Region<2> for Walls2 {
                         c.center + Point::new(t.cos(), t.sin()) * c.radius
                     })
                     .collect(),
+                // Arcs in steps of at most π/16.
+                WallShape::Stroke(s) => {
+                    s.surface(s.half * crate::math::PI / 16.0).into_iter().map(|(x, _)| x).collect()
+                }
             })
             .collect()
     }
@@ -655,6 +752,12 @@ impl Region<2> for Walls2 {
                         out = WallDistance { distance: -d, normal: -n, wall: i };
                     }
                 }
+                WallShape::Stroke(s) => {
+                    let (d, n) = s.signed_distance(x);
+                    if -d > out.distance {
+                        out = WallDistance { distance: -d, normal: -n, wall: i };
+                    }
+                }
                 WallShape::Circle(c, side) => {
                     let (d, n) = c.signed_distance(x);
                     let (d, n) = match side {
@@ -724,6 +827,32 @@ impl Region<2> for Walls2 {
             }
         }
         for (wall, w) in self.walls.iter().enumerate() {
+            if let WallShape::Stroke(s) = w {
+                // On each side face where x's perpendicular lands on its segment, and on the round end or
+                // joint at each vertex x lies beyond both segments of (curving away: curvature 0).
+                let m = s.vertices.len();
+                let mut foot = |q: Point| {
+                    let r = x - q;
+                    let d = r.norm();
+                    if d > 0.0 && (d - s.half).abs() < reach {
+                        let out = r / d;
+                        add(q + out * s.half, -out, wall, 0.0);
+                    }
+                };
+                for k in 0..m - 1 {
+                    let t = s.along(k, x);
+                    if t > 0.0 && t < 1.0 {
+                        foot(s.vertices[k] + (s.vertices[k + 1] - s.vertices[k]) * t);
+                    }
+                }
+                for j in 0..m {
+                    let past_before = j == 0 || s.along(j - 1, x) >= 1.0;
+                    let past_after = j == m - 1 || s.along(j, x) <= 0.0;
+                    if past_before && past_after {
+                        foot(s.vertices[j]);
+                    }
+                }
+            }
             if let WallShape::Circle(c, side) = w {
                 let r = x - c.center;
                 let norm = r.norm();
@@ -953,5 +1082,46 @@ mod tests {
         // Carried: (0.3, 0) + 1 rad/s × (0.1, 0.2) = (0.3 − 0.2, 0.1); the push (0, 5) is normal to the face.
         assert!((v - Point::new(0.1, 0.1)).norm() < 1e-5, "{v}");
         assert!(walls.moves() && walls.is_moving(0) && !walls.is_moving(1));
+    }
+
+    /// A bent plate (an L of two 0.4 m segments, 0.06 m wide) is an obstacle: the distance is the
+    /// distance to its centreline less the half width, its boundary points lie on its surface at most h
+    /// apart (on the outer arc of the bend too) and face into it, and a particle beside it has its foot
+    /// on the face it looks at.
+    #[test]
+    fn a_polyline_wall_is_a_stroke_with_round_ends() {
+        let plate =
+            Stroke { vertices: vec![Point::new(0.3, 0.3), Point::new(0.7, 0.3), Point::new(0.7, 0.7)], half: 0.03 };
+        let walls = Walls2::new(vec![WallShape::Stroke(plate.clone())], Point::new(1.0, 1.0));
+        let d = walls.distance(&Point::new(0.5, 0.2));
+        assert!((d.distance + 0.07).abs() < 1e-12 && (d.normal - Point::new(0.0, 1.0)).norm() < 1e-12);
+        assert!((walls.distance(&Point::new(0.5, 0.31)).distance - 0.02).abs() < 1e-12, "inside the plate");
+        // Beyond the round end at (0.3, 0.3).
+        assert!((walls.distance(&Point::new(0.2, 0.3)).distance + 0.07).abs() < 1e-12);
+        let h = 0.01;
+        let points: Vec<_> = walls.sample_points(h).into_iter().filter(|p| p.wall == 0).collect();
+        for p in &points {
+            assert!(walls.distance(&p.x).distance.abs() < 1e-9, "{:?} off the surface", p.x);
+            // (At the inner corner of the bend, where the two faces meet, either face's normal will do.)
+            let (_, out) = plate.signed_distance(&p.x);
+            let inner_corner = (p.x - Point::new(0.67, 0.33)).norm() < 1e-9;
+            assert!(inner_corner || (p.normals[0] + out).norm() < 1e-9, "normal into the wall at {:?}", p.x);
+        }
+        // Walked around, consecutive points are at most h apart (the bend's inner corner aside, where the
+        // offset lines cross: 2 gaps).
+        let gaps = points.windows(2).filter(|w| (w[1].x - w[0].x).norm() > h * (1.0 + 1e-9)).count();
+        assert!(gaps <= 2, "{gaps} gaps");
+        // Length of the surface: 2 (0.4 + 0.4) sides less the inner corner's overlap, one circle of ends,
+        // a quarter circle at the bend: about 1.6 + 2π 0.03 + π/2 0.03 − 2·0.06 ≈ 1.67 m, so ≥ 167 points.
+        assert!(points.len() >= 167, "{}", points.len());
+        let feet = walls.wall_feet(&Point::new(0.5, 0.4), 0.1);
+        let foot = feet.iter().next().expect("a foot on the upper face");
+        assert!(
+            (foot.x - Point::new(0.5, 0.33)).norm() < 1e-12 && (foot.normal - Point::new(0.0, -1.0)).norm() < 1e-12
+        );
+        // Beyond the outer corner of the bend: the foot is on its arc.
+        let feet = walls.wall_feet(&Point::new(0.75, 0.25), 0.1);
+        let expected = Point::new(0.7, 0.3) + Point::new(1.0, -1.0).normalize() * 0.03;
+        assert!(feet.iter().any(|f| (f.x - expected).norm() < 1e-12), "the bend's arc");
     }
 }

@@ -1,7 +1,7 @@
 //! Scene description (the resolved form of a scene file) and how a 2D
 //! simulation is built from it: validation, walls, particle seeding.
 
-use crate::geometry::{Circle, Point, Polygon, Region, Side, SurfaceMotion, WallShape, Walls2};
+use crate::geometry::{Circle, Point, Polygon, Region, Side, Stroke, SurfaceMotion, WallShape, Walls2};
 use crate::grid::GridLayout;
 use crate::material::Material;
 use crate::math::{Precision, Real};
@@ -143,27 +143,55 @@ pub enum WallSpec {
         #[serde(default)]
         motion: Option<Motion>,
     },
+    /// An open polyline drawn `thickness` wide (round ends and joints), material all around it: a plate,
+    /// a ramp, a paddle.
+    #[schemars(title = "PolylineWall")]
+    Polyline {
+        /// Points of the centreline, in order; consecutive points distinct.
+        #[schemars(length(min = 2), extend("unit" = "m", "unbounded" = true))]
+        vertices: Vec<[Real; 2]>,
+        /// Width of the wall (at least about 3 cells keeps material on one side from the grid points of
+        /// the other).
+        #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "m"))]
+        thickness: Real,
+        /// This wall's condition (default: the scene's `wall_condition`).
+        #[serde(default)]
+        condition: Option<WallCondition>,
+        /// Coulomb friction coefficient μ of a `separate` wall (default: the scene's `wall_friction`).
+        #[serde(default, with = "friction::optional")]
+        #[schemars(schema_with = "friction::optional_schema")]
+        friction: Option<Real>,
+        /// How the wall moves as a rigid body (default: it stays where the scene draws it).
+        #[serde(default)]
+        motion: Option<Motion>,
+    },
 }
 
 impl WallSpec {
     /// The wall's own condition, if it names one.
     pub fn condition(&self) -> Option<WallCondition> {
         match self {
-            WallSpec::Polygon { condition, .. } | WallSpec::Circle { condition, .. } => *condition,
+            WallSpec::Polygon { condition, .. }
+            | WallSpec::Circle { condition, .. }
+            | WallSpec::Polyline { condition, .. } => *condition,
         }
     }
 
     /// The wall's own friction coefficient, if it names one.
     pub fn friction(&self) -> Option<Real> {
         match self {
-            WallSpec::Polygon { friction, .. } | WallSpec::Circle { friction, .. } => *friction,
+            WallSpec::Polygon { friction, .. }
+            | WallSpec::Circle { friction, .. }
+            | WallSpec::Polyline { friction, .. } => *friction,
         }
     }
 
     /// How the wall moves, if it does.
     pub fn motion(&self) -> Option<&Motion> {
         match self {
-            WallSpec::Polygon { motion, .. } | WallSpec::Circle { motion, .. } => motion.as_ref(),
+            WallSpec::Polygon { motion, .. } | WallSpec::Circle { motion, .. } | WallSpec::Polyline { motion, .. } => {
+                motion.as_ref()
+            }
         }
     }
 }
@@ -720,6 +748,21 @@ impl Scene {
                     };
                     let circle = Circle { center: point(center), radius: *radius };
                     (WallShape::Circle(circle, side), condition, (velocity, *tangential_speed, Some(point(center))))
+                }
+                WallSpec::Polyline { vertices, thickness, condition, .. } => {
+                    let vertices: Vec<Point> = vertices.iter().map(point).collect();
+                    let r = Point::repeat(*thickness);
+                    if !vertices.iter().all(|v| near_box(&(v - r)) && near_box(&(v + r))) {
+                        return Err(far());
+                    }
+                    if let Some(k) = (1..vertices.len()).find(|&k| vertices[k] == vertices[k - 1]) {
+                        return Err(SceneError::new(
+                            format!("{key}.vertices"),
+                            format!("points {} and {k} coincide (a segment of zero length)", k - 1),
+                        ));
+                    }
+                    let stroke = Stroke { vertices, half: 0.5 * thickness };
+                    (WallShape::Stroke(stroke), condition, (&[0.0; 2], 0.0, None))
                 }
             };
             let (velocity, speed, center) = velocity;
