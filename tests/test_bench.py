@@ -49,6 +49,20 @@ def test_fig1_bench_and_report(monkeypatch):
     assert "| naive | 1 | 40 |" in text and "| augmented | 1 | 40 |" in text
 
 
+def test_moving_walls_bench_and_report():
+    """The moving-walls case times each shipped moving scene against itself with still walls, both methods,
+    the same steps each, and reports the ratio of their step times."""
+    rows = bench.bench_moving(steps=8, threads=1)
+    assert [(r["case"], r["method"]) for r in rows] == [
+        (f"moving_{name.split('/')[-1]}", m) for name in bench.MOVING_SCENES for m in bench.METHODS
+    ]
+    for r in rows:
+        assert r["steps"] == 8 and r["moving_over_still"] > 0
+        assert r["moving_over_still"] == pytest.approx(r["seconds"] / r["still_seconds"])
+    text = bench.format_report({"machine": bench._machine(1), "quick": True, "rows": rows})
+    assert "| shaken_tank | augmented |" in text
+
+
 def test_memory_is_measured_in_a_fresh_process():
     """Peak memory per particle of the 128² dam break: at least the 128 B of particle state
     (plus the grid, ~17k nodes), and not absurd."""

@@ -177,6 +177,45 @@ def bench_dam_break(resolution: int, steps: int, threads: tuple[int, ...]) -> li
     return rows
 
 
+#: Shipped scenes whose walls move, timed against themselves with the walls held still.
+MOVING_SCENES = ("moving/shaken_tank", "moving/stirred_tank")
+
+
+def bench_moving(steps: int, threads: int) -> list[dict]:
+    """The cost of moving walls: each scene of :data:`MOVING_SCENES` with its walls moving and the same
+    scene with every ``motion`` removed, both methods, interleaved; the ratio of their step times."""
+    rows = []
+    for name in MOVING_SCENES:
+        moving = load_scene(name)
+        still = moving.model_copy(deep=True)
+        for wall in still.walls:
+            wall.motion = None
+        sims = {}
+        for m in METHODS:
+            for label, scene in (("moving", moving), ("still", still)):
+                sims[f"{m}/{label}"] = Simulation(scene, m, threads=threads)
+                sims[f"{m}/{label}"].step(3)
+        result = interleaved(sims, steps, rounds=4)
+        for m in METHODS:
+            r, base = result[f"{m}/moving"], result[f"{m}/still"]
+            ratio = (
+                (r["seconds"] / r["steps"]) / (base["seconds"] / base["steps"])
+                if r["steps"] and base["steps"]
+                else math.nan
+            )
+            rows.append(
+                {
+                    "case": f"moving_{name.split('/')[-1]}",
+                    "method": m,
+                    "threads": threads,
+                    **r,
+                    "still_seconds": base["seconds"],
+                    "moving_over_still": ratio,
+                }
+            )
+    return rows
+
+
 def _memory_in_subprocess(resolution: int, method: str, precision: str = "f64") -> dict:
     """Peak memory of building and stepping one dam break, in a fresh process."""
     base = _baseline()
@@ -270,6 +309,9 @@ def run_bench(
     for res in sizes:
         log(f"dam break {res}², {steps[res]} steps, threads {thread_counts} …")
         report["rows"] += bench_dam_break(res, steps[res], thread_counts)
+    moving_steps = 300 if quick else 1_500
+    log(f"moving walls ({', '.join(MOVING_SCENES)}), {moving_steps} steps, moving and still …")
+    report["rows"] += bench_moving(moving_steps, threads)
     log("output cost (fig1 with frames, images and animation) …")
     report["rows"] += bench_output(fig1, 1_000 if quick else FIG1_STEPS, threads)
     return report
@@ -339,6 +381,16 @@ def format_report(report: dict) -> str:
             cells = " | ".join(f"{100 * r['stages_s'][s] / total:.0f}" for s in STAGES)
             label = f"{r['case']} {r.get('precision', 'f64')} {r['method']} {r['threads']}t"
             lines.append(f"| {label} | {cells} |")
+        lines.append("")
+    moving = [r for r in report["rows"] if r["case"].startswith("moving_")]
+    if moving:
+        lines += ["| moving walls | method | particles | steps | step time, moving / still walls |"]
+        lines += ["|---|---|---|---|---|"]
+        for r in moving:
+            lines.append(
+                f"| {r['case'].removeprefix('moving_')} | {r['method']} | {r['particles']:,} | {r['steps']} "
+                f"| {r['moving_over_still']:.2f}× |"
+            )
         lines.append("")
     out = [r for r in report["rows"] if r["case"] == "output"]
     if out:

@@ -144,6 +144,12 @@ pub trait Region<const D: usize>: Send + Sync {
     /// step `dt` (s) that starts there. Still walls stay.
     fn set_time(&mut self, _t: Real, _dt: Real) {}
 
+    /// A bound on how far (m) any wall point moved at the last [`Region::set_time`]: no signed distance
+    /// changed by more (infinite when unknown).
+    fn sweep(&self) -> Real {
+        Real::INFINITY
+    }
+
     /// Velocity (m/s) of wall `wall`'s surface near `x`, where its outward normal is `n`.
     fn surface_velocity(&self, _wall: usize, _x: &Vector<D>, _n: &Vector<D>) -> Vector<D> {
         Vector::<D>::zeros()
@@ -452,6 +458,8 @@ pub struct Walls2 {
     now: Vec<Pose>,
     next: Vec<Pose>,
     dt: Real,
+    /// How far (m) any wall point moved at the last `set_time`, at most.
+    sweep: Real,
 }
 
 impl Walls2 {
@@ -467,7 +475,7 @@ impl Walls2 {
         let still: Vec<Pose> = walls.iter().map(|w| Pose::still(w.centre())).collect();
         let (moves, set) = (vec![None; walls.len()], vec![None; walls.len()]);
         let drawn = walls.clone();
-        Self { drawn, walls, domain_box, motions, moves, set, now: still.clone(), next: still, dt: 0.0 }
+        Self { drawn, walls, domain_box, motions, moves, set, now: still.clone(), next: still, dt: 0.0, sweep: 0.0 }
     }
 
     /// The same walls, wall `i` moving as `moves[i]` says (`None`: still), placed at time 0.
@@ -706,9 +714,15 @@ impl Region<2> for Walls2 {
         }
     }
 
+    fn sweep(&self) -> Real {
+        self.sweep
+    }
+
     fn set_time(&mut self, t: Real, dt: Real) {
         self.dt = dt;
+        self.sweep = 0.0;
         for i in 0..self.walls.len() {
+            let before = self.now[i];
             let centre = self.drawn[i].centre();
             let poses = match (&self.set[i], &self.moves[i]) {
                 (Some(set), _) => Some((set.pose(t, self.pivot(i)), set.pose(t + dt, self.pivot(i)))),
@@ -725,9 +739,17 @@ impl Region<2> for Walls2 {
             if let Some(poses) = poses {
                 (self.now[i], self.next[i]) = poses;
                 self.walls[i] = self.drawn[i].placed(&self.now[i]);
-                if let WallShape::Circle(c, _) = &self.walls[i] {
-                    self.motions[i].center = Some(c.center);
-                }
+            }
+            // About the same pivot, a point at r from it moves by at most |Δoffset| + |Δangle| r.
+            let after = self.now[i];
+            if after.pivot != before.pivot {
+                self.sweep = Real::INFINITY;
+            } else if after != before {
+                let turn = (after.angle - before.angle).abs() * self.reach(i);
+                self.sweep = self.sweep.max((after.offset - before.offset).norm() + turn);
+            }
+            if let WallShape::Circle(c, _) = &self.walls[i] {
+                self.motions[i].center = Some(c.center);
             }
         }
     }

@@ -631,7 +631,7 @@ where
         lap.add_to(&mut times.p2g);
         // 5. Grid update (momentum → velocity, gravity), then the walls' conditions.
         state.low_mass_nodes += transfer::grid_velocity(&t, grid, &model.gravity, dt) as u64;
-        model.boundary.apply(&grid.mass, &mut grid.momentum, &mut state.wall_impulse);
+        model.boundary.apply(layout, model.region.as_ref(), &grid.mass, &mut grid.momentum, &mut state.wall_impulse);
         lap.add_to(&mut times.grid);
         // 6. G2P, advection and the deformation update (only materials that smooth their J read
         // it back from the density).

@@ -185,6 +185,45 @@ pub struct AugmentedGrid<const D: usize> {
     cell_inside: Vec<bool>,
     /// How particles and grid exchange mass and momentum.
     pub transfer: AugmentedTransfer,
+    /// What a grid whose walls move keeps between follows (`None` until the first).
+    follow: Option<Follow>,
+}
+
+/// What [`AugmentedGrid::follow`] keeps between steps, so that it looks only at what the walls swept.
+#[derive(Clone, Debug)]
+struct Follow {
+    /// How far (m) the walls may have moved in all, the sum of every follow's `Region::sweep`.
+    swept: Real,
+    /// Per node, the `swept` at which its classification may change and it must be looked at again.
+    due: Vec<Real>,
+    /// Per stencil base node, how many boundary points reach its support.
+    reached: Vec<u32>,
+}
+
+/// The cell (the node at its lower corner) that holds `x`, if it is in the grid.
+fn cell_of<const D: usize>(layout: &GridLayout<D>, x: &Vector<D>) -> Option<usize> {
+    let inv_h = 1.0 / layout.h;
+    layout.node_index(&std::array::from_fn(|k| (x[k] * inv_h).floor() as i64))
+}
+
+/// Calls `f` with each stencil base node whose particles' support can hold a boundary point at `x`: a
+/// particle with stencil base b lies in [b + 1/2, b + 3/2) h per axis, so its support is inside
+/// ((b − 1) h, (b + 3) h), and the point reaches the bases in (x/h − 3, x/h + 1).
+fn reach_bases<const D: usize>(layout: &GridLayout<D>, x: &Vector<D>, mut f: impl FnMut(usize)) {
+    let inv_h = 1.0 / layout.h;
+    let lo: [i64; D] = std::array::from_fn(|k| (x[k] * inv_h - 3.0).floor() as i64);
+    for k in 0..4usize.pow(D as u32) {
+        let mut c = lo;
+        let mut r = k;
+        for ck in c.iter_mut() {
+            *ck += (r % 4) as i64 + 1;
+            r /= 4;
+        }
+        // Bases lo+1 ..= lo+4 cover the open interval (x/h − 3, x/h + 1).
+        if let Some(i) = layout.node_index(&c) {
+            f(i);
+        }
+    }
 }
 
 impl<const D: usize> AugmentedGrid<D> {
@@ -210,71 +249,153 @@ impl<const D: usize> AugmentedGrid<D> {
         delta: Real,
     ) -> Self {
         let n = layout.num_nodes();
-        let included: Vec<bool> = (0..n).map(|i| region.distance(&layout.position(i)).distance < -delta).collect();
-
-        // Counting sort of the points by cell.
-        let inv_h = 1.0 / layout.h;
-        let cell_of = |x: &Vector<D>| layout.node_index(&std::array::from_fn(|k| (x[k] * inv_h).floor() as i64));
-        let points: Vec<BoundaryPoint<D>> = points.into_iter().filter(|p| cell_of(&p.x).is_some()).collect();
-        let mut cell_start = vec![0u32; n + 1];
-        for p in &points {
-            cell_start[cell_of(&p.x).unwrap() + 1] += 1;
+        let half_diagonal = 0.5 * layout.h * (D as Real).sqrt();
+        let mut grid = Self {
+            points: Vec::new(),
+            included: vec![false; n],
+            closed_form: vec![false; n],
+            cell_start: Vec::new(),
+            cell_points: Vec::new(),
+            walls,
+            delta,
+            spacing,
+            cell_inside: vec![false; n],
+            transfer: AugmentedTransfer::default(),
+            follow: None,
+        };
+        for i in 0..n {
+            (grid.included[i], grid.cell_inside[i]) = grid.classify(layout, region, i, half_diagonal).0;
         }
-        for c in 0..n {
-            cell_start[c + 1] += cell_start[c];
-        }
-        let mut fill = cell_start.clone();
-        let mut cell_points = vec![0u32; points.len()];
-        for (i, p) in points.iter().enumerate() {
-            let c = cell_of(&p.x).unwrap();
-            cell_points[fill[c] as usize] = i as u32;
-            fill[c] += 1;
-        }
-
+        grid.index_points(layout, points);
         // A particle with stencil base b lies in [b + 1/2, b + 3/2) h per axis, so its support
         // is inside ((b − 1) h, (b + 3) h): a boundary point at x can reach bases in (x/h − 3, x/h + 1).
-        let mut closed_form: Vec<bool> = (0..n)
-            .map(|i| {
-                let base = layout.coord(i);
-                layout.stencil_origin(&base).is_some_and(|origin| {
-                    (0..crate::math::stencil_len(D))
-                        .all(|k| included[origin + layout.offset(&crate::math::stencil_offset::<D>(k))])
-                })
-            })
-            .collect();
+        let mut reached = vec![false; n];
+        for p in &grid.points {
+            reach_bases(layout, &p.x, |i| reached[i] = true);
+        }
+        for i in 0..n {
+            grid.closed_form[i] = !reached[i] && grid.stencil_included(layout, i);
+        }
+        grid
+    }
+
+    /// Whether node `i` is included (inside the material region and farther than δ from every wall) and
+    /// whether its cell lies wholly inside the region, and how far (m) the walls may move before either
+    /// can change: the distance of each signed distance from its threshold.
+    fn classify(
+        &self,
+        layout: &GridLayout<D>,
+        region: &dyn Region<D>,
+        i: usize,
+        half_diagonal: Real,
+    ) -> ((bool, bool), Real) {
+        let node = region.distance(&layout.position(i)).distance;
+        // The signed distance is 1-Lipschitz: a cell whose centre lies deeper than its half-diagonal
+        // is inside.
+        let centre = region.distance(&layout.position(i).add_scalar(0.5 * layout.h)).distance;
+        let margin = (node + self.delta).abs().min((centre + half_diagonal).abs());
+        ((node < -self.delta, centre < -half_diagonal), margin)
+    }
+
+    /// Whether every node of the stencil with base node `i` is included (false where the stencil leaves
+    /// the grid).
+    fn stencil_included(&self, layout: &GridLayout<D>, i: usize) -> bool {
+        let base = layout.coord(i);
+        layout.stencil_origin(&base).is_some_and(|origin| {
+            (0..crate::math::stencil_len(D))
+                .all(|k| self.included[origin + layout.offset(&crate::math::stencil_offset::<D>(k))])
+        })
+    }
+
+    /// Keeps the points within the grid and sorts them by cell (a counting sort), in the per-cell index.
+    fn index_points(&mut self, layout: &GridLayout<D>, points: Vec<BoundaryPoint<D>>) {
+        let n = layout.num_nodes();
+        let points: Vec<BoundaryPoint<D>> = points.into_iter().filter(|p| cell_of(layout, &p.x).is_some()).collect();
+        self.cell_start.clear();
+        self.cell_start.resize(n + 1, 0);
         for p in &points {
-            let lo: [i64; D] = std::array::from_fn(|k| (p.x[k] * inv_h - 3.0).floor() as i64);
-            for k in 0..4usize.pow(D as u32) {
-                let mut c = lo;
-                let mut r = k;
-                for ck in c.iter_mut() {
-                    *ck += (r % 4) as i64 + 1;
-                    r /= 4;
+            self.cell_start[cell_of(layout, &p.x).unwrap() + 1] += 1;
+        }
+        for c in 0..n {
+            self.cell_start[c + 1] += self.cell_start[c];
+        }
+        let mut fill = self.cell_start.clone();
+        self.cell_points.clear();
+        self.cell_points.resize(points.len(), 0);
+        for (i, p) in points.iter().enumerate() {
+            let c = cell_of(layout, &p.x).unwrap();
+            self.cell_points[fill[c] as usize] = i as u32;
+            fill[c] += 1;
+        }
+        self.points = points;
+    }
+
+    /// The same grid where the walls are now (after they moved). Only what the walls swept is looked at
+    /// again: a node is classified again once the walls may have moved (in all, by `Region::sweep` of
+    /// each follow) as far as its signed distances were from their thresholds; the closed form is decided
+    /// again where a node's inclusion changed or a boundary point came or went; the boundary points are
+    /// sampled again and indexed. The result is the grid [`AugmentedGrid::new`] would build there.
+    pub fn follow(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>) {
+        let n = layout.num_nodes();
+        let half_diagonal = 0.5 * layout.h * (D as Real).sqrt();
+        // Re-classify a little early: the signed distances round.
+        let slack = 1e-9 * layout.h;
+        let sweep = region.sweep();
+        let Some(mut follow) = self.follow.take().filter(|_| sweep.is_finite()) else {
+            // The first follow: every node, and what the next ones need.
+            let walls = std::mem::take(&mut self.walls);
+            let transfer = self.transfer;
+            *self = Self::new(layout, region, self.spacing, walls, self.delta).with_transfer(transfer);
+            let mut follow = Follow { swept: 0.0, due: vec![0.0; n], reached: vec![0; n] };
+            for i in 0..n {
+                follow.due[i] = self.classify(layout, region, i, half_diagonal).1 - slack;
+            }
+            for p in &self.points {
+                reach_bases(layout, &p.x, |i| follow.reached[i] += 1);
+            }
+            self.follow = Some(follow);
+            return;
+        };
+        follow.swept += sweep;
+        let mut stale = Vec::new();
+        for i in 0..n {
+            if follow.due[i] <= follow.swept {
+                let (flags, margin) = self.classify(layout, region, i, half_diagonal);
+                if flags.0 != self.included[i] {
+                    stale.push(i);
                 }
-                // Bases lo+1 ..= lo+4 cover the open interval (x/h − 3, x/h + 1).
-                if let Some(i) = layout.node_index(&c) {
-                    closed_form[i] = false;
+                (self.included[i], self.cell_inside[i]) = flags;
+                follow.due[i] = follow.swept + margin - slack;
+            }
+        }
+        // The stencils that hold a node whose inclusion changed, and the bases the old and new points reach.
+        let mut bases = Vec::new();
+        for &j in &stale {
+            let c = layout.coord(j);
+            for k in 0..crate::math::stencil_len(D) {
+                let o = crate::math::stencil_offset::<D>(k);
+                if let Some(i) = layout.node_index(&std::array::from_fn(|a| c[a] - o[a] as i64)) {
+                    bases.push(i);
                 }
             }
         }
-        // The signed distance is 1-Lipschitz: a cell whose centre lies deeper than its half-diagonal
-        // is inside.
-        let half_diagonal = 0.5 * layout.h * (D as Real).sqrt();
-        let cell_inside = (0..n)
-            .map(|i| {
-                let centre = layout.position(i).add_scalar(0.5 * layout.h);
-                region.distance(&centre).distance < -half_diagonal
-            })
-            .collect();
-        let transfer = AugmentedTransfer::default();
-        Self { points, included, closed_form, cell_start, cell_points, walls, delta, spacing, cell_inside, transfer }
-    }
-
-    /// The same grid where the walls are now (after they moved).
-    pub fn follow(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>) {
-        let walls = std::mem::take(&mut self.walls);
-        let transfer = self.transfer;
-        *self = Self::new(layout, region, self.spacing, walls, self.delta).with_transfer(transfer);
+        for p in &self.points {
+            reach_bases(layout, &p.x, |i| {
+                follow.reached[i] -= 1;
+                bases.push(i);
+            });
+        }
+        self.index_points(layout, region.boundary_points(self.spacing));
+        for p in &self.points {
+            reach_bases(layout, &p.x, |i| {
+                follow.reached[i] += 1;
+                bases.push(i);
+            });
+        }
+        for i in bases {
+            self.closed_form[i] = follow.reached[i] == 0 && self.stencil_included(layout, i);
+        }
+        self.follow = Some(follow);
     }
 
     /// The same grid with transfer `transfer`.
@@ -283,7 +404,8 @@ impl<const D: usize> AugmentedGrid<D> {
         self
     }
 
-    /// Heap bytes of the boundary points, node flags and the per-cell index.
+    /// Heap bytes of the boundary points, node flags, the per-cell index and what following moving walls
+    /// keeps.
     pub fn heap_bytes(&self) -> usize {
         use crate::math::heap_bytes as b;
         b(&self.points)
@@ -292,6 +414,7 @@ impl<const D: usize> AugmentedGrid<D> {
             + b(&self.cell_start)
             + b(&self.cell_points)
             + b(&self.cell_inside)
+            + self.follow.as_ref().map_or(0, |f| b(&f.due) + b(&f.reached))
     }
 
     /// Whether `x` certainly lies inside the material region (its whole cell does); a cheap
@@ -640,5 +763,56 @@ impl<const D: usize> WallParticles<D> {
 
     pub fn is_empty(&self) -> bool {
         self.particle.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{Circle, Point, Polygon, Side, WallShape, Walls2};
+    use crate::motion::Motion;
+
+    /// Following walls only where they swept builds the grid a full build would: the same boundary
+    /// points, included nodes, closed-form bases, point index and inside cells after each of 200 steps of
+    /// a tilted tank shaken and turned about its centre and a circle carried on a path through it.
+    #[test]
+    fn following_what_the_walls_swept_is_a_full_build() {
+        let layout = GridLayout::<2>::new(1.0 / 48.0, [48, 48]);
+        let tank = Polygon::new(vec![
+            Point::new(0.15, 0.12),
+            Point::new(0.82, 0.238),
+            Point::new(0.73, 0.75),
+            Point::new(0.06, 0.632),
+        ]);
+        let shake = Motion::Oscillation {
+            amplitude: [0.05, 0.02],
+            angular_amplitude: 0.3,
+            frequency: 2.0,
+            phase: 0.0,
+            pivot: None,
+        };
+        let path = Motion::Keyframes {
+            times: vec![0.0, 0.2, 0.4],
+            positions: vec![[0.0, 0.0], [0.2, 0.05], [0.1, 0.2]],
+            angles: None,
+            pivot: None,
+        };
+        let disk = Circle { center: Point::new(0.4, 0.35), radius: 0.08 };
+        let walls = vec![WallShape::Polygon(tank), WallShape::Circle(disk, Side::Outside)];
+        let mut region = Walls2::new(walls, Point::new(1.0, 1.0)).with_moves(vec![Some(shake), Some(path)]);
+        let contacts = vec![WallContact::from(crate::wall::WallCondition::Slip); 3];
+        let (spacing, delta) = (layout.h, 0.1 * layout.h);
+        let mut grid = AugmentedGrid::new(&layout, &region, spacing, contacts.clone(), delta);
+        let dt = 2e-3;
+        for step in 0..200 {
+            region.set_time(step as Real * dt, dt);
+            grid.follow(&layout, &region);
+            let full = AugmentedGrid::new(&layout, &region, spacing, contacts.clone(), delta);
+            assert_eq!(grid.points, full.points, "step {step}");
+            assert!(grid.included == full.included, "step {step}: included");
+            assert!(grid.closed_form == full.closed_form, "step {step}: closed form");
+            assert!(grid.cell_start == full.cell_start && grid.cell_points == full.cell_points, "step {step}: index");
+            assert!(grid.cell_inside == full.cell_inside, "step {step}: inside cells");
+        }
     }
 }

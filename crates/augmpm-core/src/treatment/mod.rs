@@ -52,7 +52,14 @@ pub trait WallTreatment<const D: usize> {
     /// in 2D), to `impulse[wall]` (one per wall, the domain box last). P2G and the grid update conserve
     /// momentum, so these are the walls' impulses on the material (with the augmented grid's G2P wall
     /// fit, counted in G2P).
-    fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>], impulse: &mut [Vector<D>]);
+    fn apply(
+        &self,
+        layout: &GridLayout<D>,
+        region: &dyn Region<D>,
+        mass: &[Real],
+        velocity: &mut [Vector<D>],
+        impulse: &mut [Vector<D>],
+    );
 
     /// How each wall acts (condition, friction, whether it moves), the domain box last.
     fn contacts(&self) -> &[WallContact];
@@ -60,8 +67,9 @@ pub trait WallTreatment<const D: usize> {
     /// Says whether wall `wall` moves (its whole velocity then counts in its condition).
     fn set_moving(&mut self, wall: usize, moving: bool);
 
-    /// Follows walls that moved: what the treatment keeps of them is built again where `region`'s
-    /// walls are now (the wall-side nodes; the boundary points, included nodes and point index).
+    /// Follows walls that moved: what the treatment keeps of them is brought to where `region`'s walls
+    /// are now (naive: from then on the nodes are classified at each step where there is material;
+    /// augmented: the boundary points, and the node flags and point index where the walls swept).
     fn follow(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>);
 
     /// What P2G and G2P see of the walls this step: the augmented grid and its table, or `None`
@@ -103,8 +111,15 @@ impl<const D: usize> WallTreatment<D> for NaiveBoundary<D> {
     ) -> Result<u64, OutOfGrid> {
         Ok(0)
     }
-    fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>], impulse: &mut [Vector<D>]) {
-        NaiveBoundary::apply(self, mass, velocity, impulse)
+    fn apply(
+        &self,
+        layout: &GridLayout<D>,
+        region: &dyn Region<D>,
+        mass: &[Real],
+        velocity: &mut [Vector<D>],
+        impulse: &mut [Vector<D>],
+    ) {
+        NaiveBoundary::apply(self, layout, region, mass, velocity, impulse)
     }
     fn contacts(&self) -> &[WallContact] {
         &self.walls
@@ -112,8 +127,8 @@ impl<const D: usize> WallTreatment<D> for NaiveBoundary<D> {
     fn set_moving(&mut self, wall: usize, moving: bool) {
         self.walls[wall].moving = moving;
     }
-    fn follow(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>) {
-        self.classify(layout, region)
+    fn follow(&mut self, _: &GridLayout<D>, _: &dyn Region<D>) {
+        NaiveBoundary::follow(self)
     }
     fn transfer_view<'a>(&'a self, _: &'a WallParticles<D>) -> Option<(&'a AugmentedGrid<D>, &'a WallParticles<D>)> {
         None
@@ -165,7 +180,14 @@ impl<const D: usize> WallTreatment<D> for AugmentedGrid<D> {
     ) -> Result<u64, OutOfGrid> {
         table.update::<Ops>(self, layout, x)
     }
-    fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>], impulse: &mut [Vector<D>]) {
+    fn apply(
+        &self,
+        _: &GridLayout<D>,
+        _: &dyn Region<D>,
+        mass: &[Real],
+        velocity: &mut [Vector<D>],
+        impulse: &mut [Vector<D>],
+    ) {
         AugmentedGrid::apply(self, mass, velocity, impulse)
     }
     fn contacts(&self) -> &[WallContact] {
@@ -234,8 +256,15 @@ impl<const D: usize> WallTreatment<D> for Boundary<D> {
     ) -> Result<u64, OutOfGrid> {
         dispatch!(self, t => t.prepare::<Ops>(layout, x, table))
     }
-    fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>], impulse: &mut [Vector<D>]) {
-        dispatch!(self, t => WallTreatment::apply(t, mass, velocity, impulse))
+    fn apply(
+        &self,
+        layout: &GridLayout<D>,
+        region: &dyn Region<D>,
+        mass: &[Real],
+        velocity: &mut [Vector<D>],
+        impulse: &mut [Vector<D>],
+    ) {
+        dispatch!(self, t => WallTreatment::apply(t, layout, region, mass, velocity, impulse))
     }
     fn contacts(&self) -> &[WallContact] {
         dispatch!(self, t => t.contacts())

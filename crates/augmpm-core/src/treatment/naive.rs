@@ -21,34 +21,33 @@ pub struct WallNode<const D: usize> {
 /// (or exactly on its wall) gets its wall's condition after the grid update.
 #[derive(Clone, Debug)]
 pub struct NaiveBoundary<const D: usize> {
+    /// The wall nodes, classified once (still walls; empty when the walls move).
     pub nodes: Vec<WallNode<D>>,
     /// Condition and friction of each wall.
     pub walls: Vec<WallContact>,
+    /// Whether the walls move: the nodes are then classified where the material is, at each step.
+    moving: bool,
 }
 
 impl<const D: usize> NaiveBoundary<D> {
     /// Classifies every node of `layout` against `region`, each wall node with its wall's surface
     /// velocity there.
     pub fn new(layout: &GridLayout<D>, region: &dyn Region<D>, walls: Vec<WallContact>) -> Self {
-        let mut naive = Self { nodes: Vec::new(), walls };
+        let mut naive = Self { nodes: Vec::new(), walls, moving: false };
         naive.classify(layout, region);
         naive
     }
 
-    /// Classifies the nodes again, where the walls are now.
+    /// Classifies the nodes where the walls are now.
     pub fn classify(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>) {
-        self.nodes = (0..layout.num_nodes())
-            .filter_map(|node| {
-                let x = layout.position(node);
-                let d = region.distance(&x);
-                (d.distance >= 0.0).then(|| WallNode {
-                    node,
-                    normal: d.normal,
-                    wall: d.wall,
-                    velocity: region.surface_velocity(d.wall, &x, &d.normal),
-                })
-            })
-            .collect();
+        self.nodes = (0..layout.num_nodes()).filter_map(|node| wall_node(layout, region, node)).collect();
+    }
+
+    /// Follows walls that moved: from now on the nodes are classified at each step, and only those that
+    /// hold material (the others need no condition), so that the cost follows the material, not the grid.
+    pub fn follow(&mut self) {
+        self.moving = true;
+        self.nodes = Vec::new();
     }
 
     /// Heap bytes of the wall-node list.
@@ -57,15 +56,45 @@ impl<const D: usize> NaiveBoundary<D> {
     }
 
     /// Projects the grid velocities of wall nodes (after momentum → velocity), adding each wall's
-    /// impulse on the material, `m_i (v_i' − v_i)` (N·s), to `impulse[wall]`.
-    pub fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>], impulse: &mut [Vector<D>]) {
-        for w in &self.nodes {
+    /// impulse on the material, `m_i (v_i' − v_i)` (N·s), to `impulse[wall]`. Moving walls: the nodes
+    /// that hold material are classified against `region` where its walls are now (in node order, as
+    /// the list of still walls).
+    pub fn apply(
+        &self,
+        layout: &GridLayout<D>,
+        region: &dyn Region<D>,
+        mass: &[Real],
+        velocity: &mut [Vector<D>],
+        impulse: &mut [Vector<D>],
+    ) {
+        let mut project = |w: &WallNode<D>| {
             let m = mass[w.node];
             if m > 0.0 {
                 let before = velocity[w.node];
                 velocity[w.node] = self.walls[w.wall].apply(before, &w.normal, &w.velocity);
                 impulse[w.wall] += (velocity[w.node] - before) * m;
             }
+        };
+        if self.moving {
+            (0..layout.num_nodes())
+                .filter(|&node| mass[node] > 0.0)
+                .filter_map(|node| wall_node(layout, region, node))
+                .for_each(|w| project(&w));
+        } else {
+            self.nodes.iter().for_each(project);
         }
     }
+}
+
+/// Node `node` as a wall node, with its wall's normal and surface velocity there, if it lies on the
+/// wall side of `region` (or on a wall).
+fn wall_node<const D: usize>(layout: &GridLayout<D>, region: &dyn Region<D>, node: usize) -> Option<WallNode<D>> {
+    let x = layout.position(node);
+    let d = region.distance(&x);
+    (d.distance >= 0.0).then(|| WallNode {
+        node,
+        normal: d.normal,
+        wall: d.wall,
+        velocity: region.surface_velocity(d.wall, &x, &d.normal),
+    })
 }
