@@ -39,6 +39,19 @@ pub struct WallFoot<const D: usize> {
     /// Velocity (m/s) of the face's centre of curvature as the wall moves (zero for a still wall): what
     /// a particle's motion along a curved face is measured against.
     pub centre_velocity: Vector<D>,
+    /// The face's normal at the end of the step (a turning wall turns it; `normal` for a still one): a
+    /// particle on a straight face that moves with it must end the step on the face where it is then.
+    pub normal_next: Vector<D>,
+    /// How far (m) the particle lies past the face, when it does ([`WallFeet::pin_past`]); else 0.
+    pub depth: Real,
+}
+
+impl<const D: usize> WallFoot<D> {
+    /// A foot at `x` on a still straight face of wall `wall` whose normal (into the wall) is `normal`.
+    pub fn still(x: Vector<D>, normal: Vector<D>, wall: usize) -> Self {
+        let zero = Vector::<D>::zeros();
+        Self { x, normal, wall, velocity: zero, curvature: 0.0, centre_velocity: zero, normal_next: normal, depth: 0.0 }
+    }
 }
 
 /// Most wall faces a particle takes into account at once (a corner has two; a narrow gap more).
@@ -91,10 +104,13 @@ impl<const D: usize> WallFeet<D> {
     /// the fit would leave the particle a normal velocity `r n·C n` outward (r its depth), and a normal
     /// strain rate that persists (a lone particle sliding along a ceiling keeps its C) would carry it
     /// out exponentially from wherever rounding put it.
+    /// Its depth past the face is kept in `depth`.
     pub fn pin_past(&mut self, x: &Vector<D>) {
         for foot in self.feet[..self.len].iter_mut().flatten() {
-            if (foot.x - x).dot(&foot.normal) <= 0.0 {
+            let depth = (x - foot.x).dot(&foot.normal);
+            if depth >= 0.0 {
                 foot.x = *x;
+                foot.depth = depth;
             }
         }
     }
@@ -812,7 +828,15 @@ impl Region<2> for Walls2 {
                 } else {
                     Point::zeros()
                 };
-                let foot = WallFoot { x: q, normal, wall, velocity, curvature, centre_velocity };
+                // The turn of the wall over the step (exactly none for a still or only translated wall).
+                let turn = if self.is_moving(wall) { self.next[wall].angle - self.now[wall].angle } else { 0.0 };
+                let normal_next = if turn != 0.0 {
+                    Pose { pivot: Point::zeros(), offset: Point::zeros(), angle: turn }.turn(&normal)
+                } else {
+                    normal
+                };
+                let foot =
+                    WallFoot { x: q, normal, wall, velocity, curvature, centre_velocity, normal_next, depth: 0.0 };
                 feet.push(foot, (x - q).norm(), tolerance);
             }
         };
@@ -1015,14 +1039,7 @@ mod tests {
         for k in 0..(MAX_FEET + 2) {
             let d = [0.5, 0.1, 0.4, 0.05, 0.3, 0.2][k];
             let n = Point::new((k as Real).cos(), (k as Real).sin());
-            let foot = WallFoot {
-                x: n * d,
-                normal: n,
-                wall: k,
-                velocity: Point::zeros(),
-                curvature: 0.0,
-                centre_velocity: Point::zeros(),
-            };
+            let foot = WallFoot::still(n * d, n, k);
             feet.push(foot, d, 1e-12);
         }
         let mut kept: Vec<usize> = feet.iter().map(|f| f.wall).collect();

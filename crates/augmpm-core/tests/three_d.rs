@@ -55,9 +55,7 @@ impl Region<3> for BoxRegion {
                     let (mut foot, mut normal) = (*x, V3::zeros());
                     foot[k] = side;
                     normal[k] = sign;
-                    let still = V3::zeros();
-                    let wall =
-                        WallFoot { x: foot, normal, wall: 0, velocity: still, curvature: 0.0, centre_velocity: still };
+                    let wall = WallFoot::still(foot, normal, 0);
                     feet.push(wall, distance, 1e-12);
                 }
             }

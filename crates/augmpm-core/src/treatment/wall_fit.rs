@@ -15,6 +15,13 @@ use crate::kernel::{bspline, MlsInverse};
 use crate::math::{Matrix, Real, Vector};
 use crate::wall::{coulomb_kept, WallCondition, WallContact};
 
+/// How far inside a face (cell widths) a particle found past it is taken back to over a step.
+pub const PULL_MARGIN: Real = 1e-9;
+
+/// The most (cell widths) a particle found past a face is taken back in one step: a deep one (a failure
+/// elsewhere) comes back gradually rather than in a jump.
+pub const PULL_MAX: Real = 0.05;
+
 /// Most wall terms of one particle: every foot, each with up to three rows (sticky in 3D).
 const MAX_ROWS: usize = MAX_FEET * 3;
 
@@ -117,6 +124,7 @@ pub fn fit_to_walls<const D: usize>(
     let zero = Vector::<D>::zeros();
     let mut rows = [Row { wall: 0, n: zero, d: zero, q0: 0.0, q: zero, inv_weight: 1.0, residual: 0.0 }; MAX_ROWS];
     let mut len = 0;
+    let pull = pull_back(feet, h, dt);
     for foot in feet.iter() {
         let d = foot.x - x;
         let inv_weight = inverse_wall_weight(d.norm() / h);
@@ -138,13 +146,18 @@ pub fn fit_to_walls<const D: usize>(
         } else {
             0.0
         };
+        let contact = conditions[foot.wall];
+        // A straight face of a turning wall: the particle must end the step on the face where it is then,
+        // so its velocity along the face's normal at the end of the step is the wall point's.
+        let n = if contact.moving && foot.curvature == 0.0 { foot.normal_next } else { n };
+        // A face the particle lies past asks it back inside (`pull_back`), the same for every such face.
+        let (pull, pulled) = if foot.depth > 0.0 { (pull, -n.dot(&pull)) } else { (zero, 0.0) };
         let mut row = |n: Vector<D>, target: Real| {
             if len < MAX_ROWS {
                 rows[len] = Row { wall: foot.wall, n, d, q0, q, inv_weight, residual: target - n.dot(&fitted) };
                 len += 1;
             }
         };
-        let contact = conditions[foot.wall];
         if contact.moving {
             // A wall moving as a rigid body: its conditions hold relative to its whole velocity. The normal
             // velocity of a curved face is its centre's (a circle turning about its centre stays put; the
@@ -152,19 +165,20 @@ pub fn fit_to_walls<const D: usize>(
             let wall_n = if foot.curvature > 0.0 { n.dot(&foot.centre_velocity) } else { n.dot(&foot.velocity) };
             match contact.condition {
                 WallCondition::Sticky => {
-                    let wall = foot.velocity + n * (wall_n - n.dot(&foot.velocity) - inward);
+                    let wall = foot.velocity + n * (wall_n - n.dot(&foot.velocity) - inward) + pull;
                     each_axis(&wall, &mut row);
                 }
-                WallCondition::Slip => row(n, wall_n - inward),
+                WallCondition::Slip => row(n, wall_n - inward - pulled),
                 WallCondition::Separate => {
-                    let pressed = n.dot(&fitted) - wall_n + inward;
+                    let pressed = n.dot(&fitted) - wall_n + inward + pulled;
                     if pressed > 0.0 && contact.friction > 0.0 {
                         let slide = fitted - n * n.dot(&fitted) - (foot.velocity - n * wall_n);
                         let kept = coulomb_kept(contact.friction, pressed, slide.norm());
-                        let target = foot.velocity + n * (wall_n - n.dot(&foot.velocity) - inward) + slide * kept;
+                        let target =
+                            foot.velocity + n * (wall_n - n.dot(&foot.velocity) - inward) + slide * kept + pull;
                         each_axis(&target, &mut row);
                     } else if pressed > 0.0 {
-                        row(n, wall_n - inward)
+                        row(n, wall_n - inward - pulled)
                     }
                 }
             }
@@ -173,25 +187,25 @@ pub fn fit_to_walls<const D: usize>(
         match contact.condition {
             WallCondition::Sticky => {
                 // The wall's geometry is still: only its tangential surface velocity counts.
-                let wall = foot.velocity - n * (n.dot(&foot.velocity) + inward);
+                let wall = foot.velocity - n * (n.dot(&foot.velocity) + inward) + pull;
                 each_axis(&wall, &mut row);
             }
-            WallCondition::Slip => row(n, -inward),
+            WallCondition::Slip => row(n, -inward - pulled),
             WallCondition::Separate if contact.friction > 0.0 => {
                 // In contact, the fit meets the Coulomb update of its own value at the foot (the same
                 // cone as at the grid points): every component, like a sticky wall moving at it.
-                let pressed = n.dot(&fitted) + inward;
+                let pressed = n.dot(&fitted) + inward + pulled;
                 if pressed > 0.0 {
                     let wall_t = foot.velocity - n * n.dot(&foot.velocity);
                     let slide = fitted - n * n.dot(&fitted) - wall_t;
                     let kept = coulomb_kept(contact.friction, pressed, slide.norm());
-                    let target = wall_t + slide * kept - n * inward;
+                    let target = wall_t + slide * kept - n * inward + pull;
                     each_axis(&target, &mut row);
                 }
             }
             WallCondition::Separate => {
-                if n.dot(&fitted) > -inward {
-                    row(n, -inward)
+                if n.dot(&fitted) > -inward - pulled {
+                    row(n, -inward - pulled)
                 }
             }
         }
@@ -199,6 +213,67 @@ pub fn fit_to_walls<const D: usize>(
     let mut push = WallPush::none();
     apply_rows(&rows[..len], v, c, &mut push);
     push
+}
+
+/// The velocity (m/s) that takes a particle lying past some faces (their feet pinned to it, at `depth`
+/// past each) back to [`PULL_MARGIN`] cells (of `h`, m) inside all of them over a step of `dt` (s), or
+/// [`PULL_MAX`] cells closer where it lies deeper:
+/// `P = Σ a_k n_k` with `n_j · P = −(min(depth_j, PULL_MAX h) + PULL_MARGIN h) / dt` for every such face (faces whose
+/// normals depend on the others add nothing). Zero for a particle past no face. Its part along each
+/// face goes into the wall conditions' targets there, so that rounding cannot leave a particle past a
+/// wall for good (a particle on a face stays on it, in or out by rounding).
+fn pull_back<const D: usize>(feet: &WallFeet<D>, h: Real, dt: Real) -> Vector<D> {
+    let mut normals = [Vector::<D>::zeros(); MAX_FEET];
+    let mut k = [[0.0f64; MAX_FEET + 1]; MAX_FEET];
+    let mut m = 0;
+    for foot in feet.iter().filter(|f| f.depth > 0.0) {
+        normals[m] = foot.normal;
+        k[m][MAX_FEET] = -wide((foot.depth.min(PULL_MAX * h) + PULL_MARGIN * h) / dt);
+        m += 1;
+    }
+    if m == 0 || dt <= 0.0 {
+        return Vector::<D>::zeros();
+    }
+    for j in 0..m {
+        for l in 0..m {
+            k[j][l] = wide(normals[j].dot(&normals[l]));
+        }
+        k[j][m] = k[j][MAX_FEET];
+    }
+    let a = solve(&mut k, m);
+    (0..m).fold(Vector::<D>::zeros(), |p, j| p + normals[j] * a[j] as Real)
+}
+
+/// Solves the `m` × `m` system in the first `m` columns of `k` with right-hand side in column `m`
+/// (Gaussian elimination with partial pivoting, in f64); an unknown whose row depends on the others
+/// (its pivot below 1e-12 of the largest diagonal) is set to zero.
+fn solve<const N: usize>(k: &mut [[f64; N]], m: usize) -> [f64; MAX_ROWS] {
+    let scale = (0..m).map(|j| k[j][j].abs()).fold(0.0, f64::max);
+    let mut dependent = [false; MAX_ROWS];
+    for col in 0..m {
+        let pivot = (col..m).max_by(|&a, &b| k[a][col].abs().total_cmp(&k[b][col].abs())).unwrap_or(col);
+        k.swap(col, pivot);
+        let p = k[col][col];
+        if p.abs() <= 1e-12 * scale || p.abs() < 1e-300 {
+            dependent[col] = true;
+            continue;
+        }
+        for row in col + 1..m {
+            let f = k[row][col] / p;
+            for l in col..=m {
+                k[row][l] -= f * k[col][l];
+            }
+        }
+    }
+    let mut x = [0.0f64; MAX_ROWS];
+    for j in (0..m).rev() {
+        if dependent[j] {
+            continue;
+        }
+        let s: f64 = (j + 1..m).map(|l| k[j][l] * x[l]).sum();
+        x[j] = (k[j][m] - s) / k[j][j];
+    }
+    x
 }
 
 /// One wall row per axis, asking every component of the fit at the foot for `target`.
@@ -237,31 +312,7 @@ fn apply_rows<const D: usize>(rows: &[Row<D>], v: &mut Vector<D>, c: &mut Matrix
     }
     // A row that depends on the others (two sticky faces pinned at one particle ask the same of it)
     // gets no multiplier of its own: the consistent system is solved by the others.
-    let scale = (0..m).map(|j| k[j][j].abs()).fold(0.0, f64::max);
-    let mut dependent = [false; MAX_ROWS];
-    for col in 0..m {
-        let pivot = (col..m).max_by(|&a, &b| k[a][col].abs().total_cmp(&k[b][col].abs())).unwrap_or(col);
-        k.swap(col, pivot);
-        let p = k[col][col];
-        if p.abs() <= 1e-12 * scale || p.abs() < 1e-300 {
-            dependent[col] = true;
-            continue;
-        }
-        for row in col + 1..m {
-            let f = k[row][col] / p;
-            for l in col..=m {
-                k[row][l] -= f * k[col][l];
-            }
-        }
-    }
-    let mut lambda = [0.0f64; MAX_ROWS];
-    for j in (0..m).rev() {
-        if dependent[j] {
-            continue;
-        }
-        let s: f64 = (j + 1..m).map(|l| k[j][l] * lambda[l]).sum();
-        lambda[j] = (k[j][m] - s) / k[j][j];
-    }
+    let lambda = solve(&mut k, m);
     for (row, &l) in rows.iter().zip(&lambda) {
         let l = l as Real;
         let dv = row.n * (l * row.q0);
@@ -279,8 +330,7 @@ mod tests {
 
     fn foot(x: Vector2<Real>, normal: Vector2<Real>, curvature: Real) -> WallFeet<2> {
         let mut feet = WallFeet::default();
-        let centre_velocity = Vector2::zeros();
-        feet.push(WallFoot { x, normal, wall: 0, velocity: Vector2::zeros(), curvature, centre_velocity }, 0.0, 1e-12);
+        feet.push(WallFoot { curvature, ..WallFoot::still(x, normal, 0) }, 0.0, 1e-12);
         feet
     }
 
@@ -312,7 +362,8 @@ mod tests {
 
     /// A particle that rounding put a depth r past a ceiling (slip), in a fitted field that stretches
     /// normal to the wall (C_nn = 20/s), is carried farther out at r·C_nn when the condition is met at
-    /// the foot behind it, and not at all once its foot is pinned to it: its normal velocity is zero.
+    /// the foot behind it; once its foot is pinned to it, it is taken back to 1e-9 h inside over the step
+    /// (normal velocity −(r + 1e-9 h)/dt) and keeps its tangential velocity.
     #[test]
     fn a_particle_past_a_wall_is_not_carried_farther_out() {
         let (h, depth) = (0.01, 1e-7);
@@ -327,7 +378,9 @@ mod tests {
         feet.pin_past(&x);
         let (mut v, mut c) = (Vector2::new(1.0, 0.0), stretch);
         fit_to_walls(&minv, &x, &feet, &[WallCondition::Slip.into()], (h, 1e-3), &mut v, &mut c);
-        assert!(v.dot(&normal).abs() < 1e-15 && (v.x - 1.0).abs() < 1e-12, "pinned: {v}");
+        let back = -(depth + PULL_MARGIN * h) / 1e-3;
+        assert!((v.dot(&normal) - back).abs() < 1e-8 * back.abs() && (v.x - 1.0).abs() < 1e-12, "pinned: {v}");
+        assert!(x.y + v.y * 1e-3 < 0.8, "inside after the step");
     }
 
     /// A particle on a rough separate floor (μ = 0.5) whose fit presses into it at 1 m/s while sliding
@@ -350,7 +403,8 @@ mod tests {
     }
 
     /// A particle past both faces of a sticky corner, both feet pinned to it, takes the wall's velocity
-    /// (zero): the two faces' identical rows are solved together, not dropped.
+    /// (zero) and the one velocity that takes it back 1e-9 h inside both faces over the step: the two
+    /// faces' identical rows are solved together, not dropped.
     #[test]
     fn a_particle_past_a_sticky_corner_takes_the_wall_velocity() {
         let h = 0.01;
@@ -360,14 +414,16 @@ mod tests {
         for (foot, normal) in
             [(Vector2::new(0.5, x.y), Vector2::new(1.0, 0.0)), (Vector2::new(x.x, 0.5), Vector2::new(0.0, 1.0))]
         {
-            let still = Vector2::zeros();
-            let foot = WallFoot { x: foot, normal, wall: 0, velocity: still, curvature: 0.0, centre_velocity: still };
+            let foot = WallFoot::still(foot, normal, 0);
             feet.push(foot, 1e-7, 1e-12);
         }
         feet.pin_past(&x);
         let (mut v, mut c) = (Vector2::new(0.3, -0.7), Matrix2::new(1.0, 2.0, 3.0, 4.0));
         fit_to_walls(&minv, &x, &feet, &[WallCondition::Sticky.into()], (h, 1e-3), &mut v, &mut c);
-        assert!(v.norm() < 1e-12, "{v}");
+        let back = -(1e-7 + PULL_MARGIN * h) / 1e-3;
+        assert!((v - Vector2::new(back, back)).norm() < 1e-8 * back.abs(), "{v}");
+        let end = x + v * 1e-3;
+        assert!(end.x < 0.5 && end.y < 0.5 && (end.x - (0.5 - PULL_MARGIN * h)).abs() < 1e-14, "{end}");
     }
 
     /// Inside a circular container of radius R, a particle on the slip wall moving along it at
