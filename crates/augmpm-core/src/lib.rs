@@ -14,6 +14,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod geometry;
+pub mod geometry3;
 pub mod grid;
 pub mod kernel;
 pub mod material;

@@ -1,8 +1,13 @@
 //! What a wall asks of the material against it: its condition (sticky, slip, separate), applied to a
-//! velocity at one or two normals, and the points sampled along it that join the augmented grid.
+//! velocity at one, two or three normals (a face, an edge or corner in 2D, a corner in 3D), and the
+//! points sampled along it that join the augmented grid.
 
 use crate::math::{Real, Vector};
 use schemars::JsonSchema;
+
+/// The outward unit normals (into the wall) at a point of a wall: three, repeated where fewer faces
+/// meet (`[n, n, n]` on a face, `[n0, n1, n1]` at a 2D corner or a 3D edge).
+pub type Normals<const D: usize> = [Vector<D>; 3];
 use serde::{Deserialize, Serialize};
 
 /// What a wall does to the velocity of the material against it.
@@ -23,37 +28,48 @@ impl WallCondition {
     /// (unit, into the wall) whose surface moves at `wall_v`.
     #[inline]
     pub fn apply<const D: usize>(self, v: Vector<D>, n: &Vector<D>, wall_v: &Vector<D>) -> Vector<D> {
-        self.apply_at(v, &[*n, *n], wall_v)
+        self.apply_at(v, &[*n, *n, *n], wall_v)
     }
 
-    /// Applies the condition at a point with one or two outward unit normals (a corner).
+    /// Applies the condition at a point with one, two or three outward unit normals (a corner).
     ///
     /// The wall's geometry stays still, so only the tangential part of `wall_v` counts.
-    /// Relative to it, sticky leaves nothing; slip removes the components along both
+    /// Relative to it, sticky leaves nothing; slip removes the components along all the
     /// normals at once (projection on the complement of their span), so a corner of any
-    /// angle is satisfied exactly; separate takes the closest velocity that does not move
-    /// into either face (the projection on the cone `u·n0 ≤ 0, u·n1 ≤ 0`).
+    /// angles is satisfied exactly; separate takes the closest velocity that does not move
+    /// into any face (the projection on the cone `u·n_k ≤ 0`).
     #[inline]
-    pub fn apply_at<const D: usize>(self, v: Vector<D>, normals: &[Vector<D>; 2], wall_v: &Vector<D>) -> Vector<D> {
+    pub fn apply_at<const D: usize>(self, v: Vector<D>, normals: &Normals<D>, wall_v: &Vector<D>) -> Vector<D> {
         self.apply_relative(v, normals, &tangential(*wall_v, normals))
     }
 
     /// Applies the condition relative to a wall moving at `wall_v`, its normal part included (a wall
     /// that moves as a rigid body).
     #[inline]
-    pub fn apply_relative<const D: usize>(
-        self,
-        v: Vector<D>,
-        normals: &[Vector<D>; 2],
-        wall_v: &Vector<D>,
-    ) -> Vector<D> {
-        let [n0, n1] = normals;
+    pub fn apply_relative<const D: usize>(self, v: Vector<D>, normals: &Normals<D>, wall_v: &Vector<D>) -> Vector<D> {
+        let [n0, n1, n2] = normals;
         let tangential = |u: Vector<D>| tangential(u, normals);
         let wall_t = *wall_v;
         let rel = v - wall_t;
         let out = match self {
             WallCondition::Sticky => Vector::<D>::zeros(),
             WallCondition::Slip => tangential(rel),
+            WallCondition::Separate if n2 != n1 => {
+                // Three faces: the nearest feasible projection on the complement of the span of each
+                // subset of the normals (the projection on the cone is one of them; all three: always).
+                let feasible = |u: &Vector<D>, tolerance: Real| normals.iter().all(|n| u.dot(n) <= tolerance);
+                if feasible(&rel, 0.0) {
+                    rel
+                } else {
+                    let tolerance = (1e-12 as Real).max(16.0 * Real::EPSILON) * rel.norm();
+                    let subsets = [[n0, n0, n0], [n1, n1, n1], [n2, n2, n2], [n0, n1, n1], [n0, n2, n2], [n1, n2, n2]];
+                    subsets
+                        .iter()
+                        .map(|&[a, b, c]| tangential_to(rel, &[*a, *b, *c]))
+                        .filter(|u| feasible(u, tolerance))
+                        .fold(tangential(rel), |best, u| if (u - rel).norm() < (best - rel).norm() { u } else { best })
+                }
+            }
             WallCondition::Separate => {
                 let feasible = |u: &Vector<D>| u.dot(n0) <= 0.0 && u.dot(n1) <= 0.0;
                 if feasible(&rel) {
@@ -74,16 +90,36 @@ impl WallCondition {
     }
 }
 
-/// The part of `u` orthogonal to both `normals` (the projection on the complement of their span).
+/// The part of `u` orthogonal to all `normals` (the projection on the complement of their span).
 #[inline]
-fn tangential<const D: usize>(u: Vector<D>, [n0, n1]: &[Vector<D>; 2]) -> Vector<D> {
-    // Orthonormal basis {e0, e1} of span{n0, n1}. Two equal normals (no corner) leave a residue of
-    // the rounding (~1e-7 in f32): only a residue above it is a second direction.
+fn tangential<const D: usize>(u: Vector<D>, normals: &Normals<D>) -> Vector<D> {
+    tangential_to(u, normals)
+}
+
+/// [`tangential`], by Gram–Schmidt: an orthonormal basis of the normals' span, each normal's residue
+/// after the earlier ones counting only above the rounding (two equal normals leave ~1e-7 in f32).
+/// A third normal equal to the second (a face, a 2D corner, a 3D edge) is skipped.
+#[inline]
+fn tangential_to<const D: usize>(u: Vector<D>, [n0, n1, n2]: &Normals<D>) -> Vector<D> {
+    let floor = (1e-9 as Real).max(16.0 * Real::EPSILON);
     let r = n1 - n0 * n1.dot(n0);
     let u = u - n0 * u.dot(n0);
-    if r.norm() > (1e-9 as Real).max(16.0 * Real::EPSILON) {
+    let (u, e1) = if r.norm() > floor {
         let e1 = r.normalize();
-        u - e1 * u.dot(&e1)
+        (u - e1 * u.dot(&e1), Some(e1))
+    } else {
+        (u, None)
+    };
+    if n2 == n1 {
+        return u;
+    }
+    let mut r2 = n2 - n0 * n2.dot(n0);
+    if let Some(e1) = e1 {
+        r2 -= e1 * r2.dot(&e1);
+    }
+    if r2.norm() > floor {
+        let e2 = r2.normalize();
+        u - e2 * u.dot(&e2)
     } else {
         u
     }
@@ -123,15 +159,15 @@ impl WallContact {
     /// The contact at a wall of outward normal `n` (unit, into the wall) moving at `wall_v`.
     #[inline]
     pub fn apply<const D: usize>(self, v: Vector<D>, n: &Vector<D>, wall_v: &Vector<D>) -> Vector<D> {
-        self.apply_at(v, &[*n, *n], wall_v)
+        self.apply_at(v, &[*n, *n, *n], wall_v)
     }
 
-    /// The condition at a point with one or two outward unit normals ([`WallCondition::apply_at`]),
+    /// The condition at a point with one, two or three outward unit normals ([`WallCondition::apply_at`]),
     /// then Coulomb friction: where the condition removed a velocity Δ into the wall (relative to
     /// it), the tangential relative velocity shrinks by μ|Δ|, stopping where it would reverse (the
     /// usual MPM update, Bardenhagen et al. 2000). Material moving off the wall is left as it is.
     #[inline]
-    pub fn apply_at<const D: usize>(self, v: Vector<D>, normals: &[Vector<D>; 2], wall_v: &Vector<D>) -> Vector<D> {
+    pub fn apply_at<const D: usize>(self, v: Vector<D>, normals: &Normals<D>, wall_v: &Vector<D>) -> Vector<D> {
         let reference = if self.moving { *wall_v } else { tangential(*wall_v, normals) };
         let out = self.condition.apply_relative(v, normals, &reference);
         if self.friction == 0.0 || self.condition != WallCondition::Separate {
@@ -154,8 +190,8 @@ impl WallContact {
 pub struct BoundaryPoint<const D: usize> {
     /// Position (m).
     pub x: Vector<D>,
-    /// Outward unit normals (into the wall); two at a corner, else `normals[1] == normals[0]`.
-    pub normals: [Vector<D>; 2],
+    /// Outward unit normals (into the wall): repeated where fewer faces meet ([`Normals`]).
+    pub normals: Normals<D>,
     /// Index of the wall it was sampled on.
     pub wall: usize,
     /// Velocity of the wall surface there (m/s): of a still wall only its tangential part acts, of a
@@ -164,9 +200,14 @@ pub struct BoundaryPoint<const D: usize> {
 }
 
 impl<const D: usize> BoundaryPoint<D> {
-    /// A point of a still wall.
+    /// A point of a still wall on a face (`n0 == n1`) or where two faces meet.
     pub fn new(x: Vector<D>, n0: Vector<D>, n1: Vector<D>, wall: usize) -> Self {
-        Self { x, normals: [n0, n1], wall, velocity: Vector::<D>::zeros() }
+        Self::with_normals(x, [n0, n1, n1], wall)
+    }
+
+    /// A point of a still wall with the given normals (three faces meet at a 3D corner).
+    pub fn with_normals(x: Vector<D>, normals: Normals<D>, wall: usize) -> Self {
+        Self { x, normals, wall, velocity: Vector::<D>::zeros() }
     }
 }
 
@@ -184,7 +225,7 @@ mod tests {
         let n1 = Vector2::new(a.sin(), -a.cos());
         let v = Vector2::new(0.7, -1.3);
         let still = Vector2::zeros();
-        let out = WallCondition::Slip.apply_at(v, &[n0, n1], &still);
+        let out = WallCondition::Slip.apply_at(v, &[n0, n1, n1], &still);
         assert!(out.dot(&n0).abs() < 1e-15 && out.dot(&n1).abs() < 1e-15);
         let sequential = {
             let u = v - n0 * v.dot(&n0);
@@ -194,12 +235,12 @@ mod tests {
         // 3D: two faces meeting along the z axis; the velocity along the edge survives.
         let (m0, m1) = (nalgebra::Vector3::new(0.0, -1.0, 0.0), nalgebra::Vector3::new(a.sin(), -a.cos(), 0.0));
         let v3 = nalgebra::Vector3::new(0.7, -1.3, 2.5);
-        let out3 = WallCondition::Slip.apply_at(v3, &[m0, m1], &nalgebra::Vector3::zeros());
+        let out3 = WallCondition::Slip.apply_at(v3, &[m0, m1, m1], &nalgebra::Vector3::zeros());
         assert!(out3.dot(&m0).abs() < 1e-15 && out3.dot(&m1).abs() < 1e-15);
         assert!((out3.z - 2.5).abs() < 1e-15);
         // A velocity tangent to a straight wall passes unchanged.
         let tangent = Vector2::new(2.0, 0.0);
-        assert_eq!(WallCondition::Slip.apply_at(tangent, &[n0, n0], &still), tangent);
+        assert_eq!(WallCondition::Slip.apply_at(tangent, &[n0, n0, n0], &still), tangent);
     }
 
     /// Separate at a 120° (obtuse) corner: leaving along one face is allowed when that
@@ -211,14 +252,37 @@ mod tests {
         let n1 = Vector2::new(-a.sin(), -a.cos());
         let still = Vector2::zeros();
         let v = Vector2::new(0.5, -1.0);
-        let out = WallCondition::Separate.apply_at(v, &[n0, n1], &still);
+        let out = WallCondition::Separate.apply_at(v, &[n0, n1, n1], &still);
         assert!((out - Vector2::new(0.5, 0.0)).norm() < 1e-15, "{out}");
         let into_both = Vector2::new(-0.5, -1.0);
-        let out = WallCondition::Separate.apply_at(into_both, &[n0, n1], &still);
+        let out = WallCondition::Separate.apply_at(into_both, &[n0, n1, n1], &still);
         assert!(out.dot(&n0) <= 1e-15 && out.dot(&n1) <= 1e-15);
         assert!(out.norm() < 1e-15, "{out}");
         let away = Vector2::new(0.3, 1.0);
-        assert_eq!(WallCondition::Separate.apply_at(away, &[n0, n1], &still), away);
+        assert_eq!(WallCondition::Separate.apply_at(away, &[n0, n1, n1], &still), away);
+    }
+
+    /// At a 3D corner where three faces meet at angles other than 90° (the floor and two walls leaning
+    /// 20° and 30°), slip leaves no velocity at all (three independent normals span space), and separate
+    /// projects on the cone: a velocity into the floor alone slides along the floor's edge with the
+    /// nearer wall, one leaving the corner passes unchanged, and the result never moves into a face.
+    #[test]
+    fn three_faces_at_a_3d_corner() {
+        use nalgebra::Vector3;
+        let (a, b) = (20f64.to_radians(), 30f64.to_radians());
+        let normals =
+            [Vector3::new(0.0, -1.0, 0.0), Vector3::new(-a.cos(), a.sin(), 0.0), Vector3::new(0.0, b.sin(), -b.cos())];
+        let still = Vector3::zeros();
+        let v = Vector3::new(-0.4, -1.0, -0.3);
+        assert!(WallCondition::Slip.apply_at(v, &normals, &still).norm() < 1e-14);
+        for v in [v, Vector3::new(0.5, -1.0, 0.7), Vector3::new(-0.2, 0.1, -2.0), Vector3::new(-3.0, -0.5, 0.1)] {
+            let out = WallCondition::Separate.apply_at(v, &normals, &still);
+            assert!(normals.iter().all(|n| out.dot(n) <= 1e-14), "{v} → {out}");
+            // The projection on a convex cone: v − out is normal to it at out (out·(v − out) = 0).
+            assert!(out.dot(&(v - out)).abs() < 1e-12, "{v} → {out}");
+        }
+        let away = Vector3::new(0.6, 0.2, 0.6);
+        assert_eq!(WallCondition::Separate.apply_at(away, &normals, &still), away);
     }
 
     /// The wall's geometry is still: a wall velocity with a normal part only moves the material
