@@ -108,16 +108,7 @@ fn simulation(material: Material, augmented: bool) -> Simulation<3> {
     } else {
         Boundary::Naive(NaiveBoundary::new(&layout, &region, condition))
     };
-    let mut model = Model {
-        layout,
-        materials: vec![material],
-        gravity: V3::new(0.0, -9.81, 0.0),
-        region: Box::new(region),
-        boundary,
-        wall_fraction: None,
-        dt: 0.0,
-    };
-    model.dt = 0.4 * model.stable_dt().min(0.2 * h / 3.0);
+    let model = model(layout, Box::new(region), boundary, material);
     // A 0.25 m cube of material, 2 particles per cell per axis, resting 0.1 m above the floor.
     let mut particles = Particles::default();
     let spacing = 0.5 * h;
@@ -133,6 +124,23 @@ fn simulation(material: Material, augmented: bool) -> Simulation<3> {
         }
     }
     Simulation::new(model, particles)
+}
+
+/// The model of one material in `region` under gravity (−y), at 0.4 of the stable step (and of 0.2 h
+/// per step at 3 m/s).
+fn model(layout: GridLayout<3>, region: Box<dyn Region<3>>, boundary: Boundary<3>, material: Material) -> Model<3> {
+    let h = layout.h;
+    let mut model = Model {
+        layout,
+        materials: vec![material],
+        gravity: V3::new(0.0, -9.81, 0.0),
+        region,
+        boundary,
+        wall_fraction: None,
+        dt: 0.0,
+    };
+    model.dt = 0.4 * model.stable_dt().min(0.2 * h / 3.0);
+    model
 }
 
 fn materials() -> Vec<Material> {
@@ -205,17 +213,7 @@ fn water_in_a_tilted_box_stays_inside_with_the_augmented_grid() {
         } else {
             Boundary::Naive(NaiveBoundary::new(&layout, &region(), contacts))
         };
-        let material = materials()[1].clone();
-        let mut model = Model {
-            layout,
-            materials: vec![material],
-            gravity: V3::new(0.0, -9.81, 0.0),
-            region: Box::new(region()),
-            boundary,
-            wall_fraction: None,
-            dt: 0.0,
-        };
-        model.dt = 0.4 * model.stable_dt().min(0.2 * h / 3.0);
+        let model = model(layout, Box::new(region()), boundary, materials()[1].clone());
         // A ball of water, 2 particles per cell per axis, in the middle of the container.
         let mut particles = Particles::default();
         let spacing = 0.5 * h;
