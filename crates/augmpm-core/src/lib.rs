@@ -23,6 +23,7 @@ pub mod motion;
 pub mod parallel;
 pub mod particles;
 pub mod scene;
+pub mod scene3;
 pub mod schema;
 pub mod simulation;
 pub mod step;

@@ -206,11 +206,11 @@ pub enum SideSpec {
     Inside,
 }
 
-fn default_side() -> SideSpec {
+pub(crate) fn default_side() -> SideSpec {
     SideSpec::Outside
 }
 
-fn inside() -> SideSpec {
+pub(crate) fn inside() -> SideSpec {
     SideSpec::Inside
 }
 
@@ -378,7 +378,7 @@ impl Default for AugmentedSpec {
 
 /// A friction coefficient in scene files: a number ≥ 0, or "inf" (JSON has no infinity; TOML's `inf`
 /// reaches the engine as "inf").
-mod friction {
+pub(crate) mod friction {
     use super::Real;
     use serde::{Deserialize, Deserializer, Serializer};
 
@@ -443,19 +443,19 @@ mod friction {
 }
 
 /// Bounds every item of a vector to be positive (a transform of its schema).
-fn items_positive(schema: &mut schemars::Schema) {
+pub(crate) fn items_positive(schema: &mut schemars::Schema) {
     if let Some(items) = schema.get_mut("items").and_then(|i| i.as_object_mut()) {
         items.insert("exclusiveMinimum".into(), 0.0.into());
     }
 }
 
 /// Largest grid accepted (nodes, ghosts included): 16.7 M nodes, about 1 GB of node state.
-const MAX_GRID_NODES: u64 = 1 << 24;
+pub(crate) const MAX_GRID_NODES: u64 = 1 << 24;
 /// Bytes per grid node: mass, B-spline mass, momentum (2D), the density's node sums (the grid density's
 /// mass, or the smoothed J's volume and volume·J), flags and blocks.
 const GRID_BYTES_PER_NODE: u64 = 7 * std::mem::size_of::<Real>() as u64;
 /// Largest number of jittered candidate points per body: 20 M particles need about 4 GB.
-const MAX_SEED_CANDIDATES: u64 = 20_000_000;
+pub(crate) const MAX_SEED_CANDIDATES: u64 = 20_000_000;
 
 /// Bytes per particle of a running simulation: its state (the per-particle fields of
 /// [`crate::simulation::State::fields`]), the schedule's order (one index) and, while seeding, the candidate
@@ -776,48 +776,15 @@ impl Scene {
         Ok((Walls2::new(shapes, extent).with_motions(motions).with_moves(moves), conditions))
     }
 
-    /// The time step (s) of a validated scene, and a warning when `time.dt` exceeds the stable bound.
-    /// The time step (s) of a validated scene, and a warning when `time.dt` exceeds the stable bound.
-    /// With moving walls, `fastest` (the fastest wall and its top speed, m/s) may move at most one cell
-    /// `h` (m) per step: `time.cfl` takes the step that keeps it there, a `time.dt` beyond is refused.
+    /// The time step (s) of a validated scene, and a warning when `time.dt` exceeds the stable bound
+    /// ([`time_step`]).
     fn dt(
         &self,
         model_stable_dt: Real,
         fastest: Option<(usize, Real)>,
         h: Real,
     ) -> Result<(Real, Option<String>), SceneError> {
-        match (self.time.dt, self.time.cfl) {
-            (Some(dt), _) => {
-                if let Some((wall, speed)) = fastest.filter(|(_, speed)| speed * dt > h) {
-                    return Err(SceneError::new(
-                        format!("walls[{wall}].motion"),
-                        format!(
-                            "moves up to {speed:.4e} m/s, {:.3} cells in a step of time.dt = {dt:e} s (at most one \
-                             cell per step); lower time.dt or give time.cfl",
-                            speed * dt / h
-                        ),
-                    ));
-                }
-                let warning = (dt > model_stable_dt).then(|| {
-                    format!(
-                        "time.dt = {dt:e} s exceeds the stable bound {model_stable_dt:e} s of the materials \
-                         (one cell per step at the wave speed, or the viscous limit); the run may blow up"
-                    )
-                });
-                Ok((dt, warning))
-            }
-            (None, cfl) => {
-                let walls_dt = fastest.map_or(Real::INFINITY, |(_, speed)| h / speed);
-                let dt = cfl.unwrap_or(1.0) * model_stable_dt.min(walls_dt);
-                if !(dt.is_finite() && dt > 0.0) {
-                    return Err(SceneError::new(
-                        "time.cfl",
-                        format!("the materials' stable step is {model_stable_dt:e} s; give time.dt instead"),
-                    ));
-                }
-                Ok((dt, None))
-            }
-        }
+        time_step(&self.time, model_stable_dt, fastest, h)
     }
 
     /// The grid, the material region and the walls' boundary handling, without bodies.
@@ -970,6 +937,50 @@ impl Scene {
             );
         }
         Ok((Simulation::new(model, particles), warnings))
+    }
+}
+
+/// The time step (s) of validated time settings, and a warning when `time.dt` exceeds the stable bound
+/// `model_stable_dt` (s) of the materials.
+/// With moving walls, `fastest` (the fastest wall and its top speed, m/s) may move at most one cell
+/// `h` (m) per step: `time.cfl` takes the step that keeps it there, a `time.dt` beyond is refused.
+pub(crate) fn time_step(
+    time: &TimeSpec,
+    model_stable_dt: Real,
+    fastest: Option<(usize, Real)>,
+    h: Real,
+) -> Result<(Real, Option<String>), SceneError> {
+    match (time.dt, time.cfl) {
+        (Some(dt), _) => {
+            if let Some((wall, speed)) = fastest.filter(|(_, speed)| speed * dt > h) {
+                return Err(SceneError::new(
+                    format!("walls[{wall}].motion"),
+                    format!(
+                        "moves up to {speed:.4e} m/s, {:.3} cells in a step of time.dt = {dt:e} s (at most one \
+                         cell per step); lower time.dt or give time.cfl",
+                        speed * dt / h
+                    ),
+                ));
+            }
+            let warning = (dt > model_stable_dt).then(|| {
+                format!(
+                    "time.dt = {dt:e} s exceeds the stable bound {model_stable_dt:e} s of the materials \
+                     (one cell per step at the wave speed, or the viscous limit); the run may blow up"
+                )
+            });
+            Ok((dt, warning))
+        }
+        (None, cfl) => {
+            let walls_dt = fastest.map_or(Real::INFINITY, |(_, speed)| h / speed);
+            let dt = cfl.unwrap_or(1.0) * model_stable_dt.min(walls_dt);
+            if !(dt.is_finite() && dt > 0.0) {
+                return Err(SceneError::new(
+                    "time.cfl",
+                    format!("the materials' stable step is {model_stable_dt:e} s; give time.dt instead"),
+                ));
+            }
+            Ok((dt, None))
+        }
     }
 }
 

@@ -44,11 +44,16 @@ fn bounded(schema: &Value) -> bool {
         || schema.get("anyOf").and_then(Value::as_array).is_some_and(|o| o.iter().any(bounded))
 }
 
-/// Every key has a one-line doc; every numeric key a unit and a range (bounds, or `unbounded`: any
-/// finite value); a tag key (`type`, `shape`) is documented by its options.
+/// Every key of 2D and 3D scenes has a one-line doc; every numeric key a unit and a range (bounds, or
+/// `unbounded`: any finite value); a tag key (`type`, `shape`) is documented by its options.
 #[test]
 fn every_key_has_a_doc_a_unit_and_a_range() {
-    let root = Scene::schema();
+    for root in [Scene::schema(), augmpm_core::scene3::Scene3::schema()] {
+        documented(root);
+    }
+}
+
+fn documented(root: &Value) {
     let mut missing = Vec::new();
     let mut keys = 0;
     each_key(root, root, "", &mut |key, schema| {
@@ -75,10 +80,11 @@ fn every_key_has_a_doc_a_unit_and_a_range() {
 /// Every option of a choice of names (`wall_condition`, `method`, ...) has a doc of its own.
 #[test]
 fn every_option_has_a_doc() {
-    let root = Scene::schema();
-    for (name, def) in root["$defs"].as_object().unwrap() {
-        for option in def.get("oneOf").and_then(Value::as_array).into_iter().flatten() {
-            assert!(option.get("description").is_some(), "{name}: option {} has no doc", option["const"]);
+    for root in [Scene::schema(), augmpm_core::scene3::Scene3::schema()] {
+        for (name, def) in root["$defs"].as_object().unwrap() {
+            for option in def.get("oneOf").and_then(Value::as_array).into_iter().flatten() {
+                assert!(option.get("description").is_some(), "{name}: option {} has no doc", option["const"]);
+            }
         }
     }
 }

@@ -1,0 +1,579 @@
+//! The scene of a 3D simulation: the keys of a 2D scene ([`crate::scene::Scene`]) with three-component
+//! vectors (`grid.domain`, `gravity`, positions, velocities), 3D walls (boxes, planes, spheres,
+//! cylinders; [`crate::geometry3`]) and 3D bodies (boxes, spheres, cylinders), and how a
+//! `Simulation<3>` is built from it.
+
+use crate::geometry::{Region, Side};
+use crate::geometry3::{Solid, Wall3, Walls3};
+use crate::grid::GridLayout;
+use crate::material::{ConstitutiveModel, Material};
+use crate::math::{Matrix, Precision, Real, Vector};
+use crate::particles::Particles;
+use crate::scene::{
+    default_side, friction, inside, time_step, AugmentedSpec, SceneError, Seeding, SideSpec, TimeSpec, MAX_GRID_NODES,
+    MAX_SEED_CANDIDATES,
+};
+use crate::simulation::{Model, Simulation};
+use crate::treatment::augmented::AugmentedGrid;
+use crate::treatment::naive::NaiveBoundary;
+use crate::treatment::{Boundary, Method};
+use crate::wall::{WallCondition, WallContact};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+type P3 = Vector<3>;
+
+/// The background grid of a 3D scene.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+#[schemars(title = "Grid3")]
+pub struct Grid3Spec {
+    /// Size of the domain box [0, Lx] × [0, Ly] × [0, Lz], always a wall.
+    #[schemars(extend("unit" = "m"), transform = crate::scene::items_positive)]
+    pub domain: [Real; 3],
+    /// Cells along x: h = Lx / resolution; Ly and Lz must be whole numbers of cells.
+    #[schemars(range(min = 2, max = 4096), extend("unit" = "cells"))]
+    pub resolution: usize,
+}
+
+/// A 3D wall.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+pub enum Wall3Spec {
+    /// A box turned by `angle` about `axis`, material `inside` it (a container, the default) or
+    /// `outside` it (an obstacle).
+    #[schemars(title = "BoxWall")]
+    Box {
+        /// Centre.
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
+        center: [Real; 3],
+        /// Edge lengths along the box's own axes.
+        #[schemars(extend("unit" = "m"), transform = crate::scene::items_positive)]
+        size: [Real; 3],
+        /// Axis the box is turned about (any length but zero).
+        #[serde(default = "z_axis")]
+        #[schemars(extend("unit" = "1", "unbounded" = true))]
+        axis: [Real; 3],
+        /// Angle the box is turned by about `axis`, counter-clockwise seen from its tip.
+        #[serde(default)]
+        #[schemars(extend("unit" = "rad", "unbounded" = true))]
+        angle: Real,
+        /// Where the material is: `inside` the box (a container) or `outside` (an obstacle).
+        #[serde(default = "inside")]
+        side: SideSpec,
+        /// This wall's condition (default: the scene's `wall_condition`).
+        #[serde(default)]
+        condition: Option<WallCondition>,
+        /// Coulomb friction coefficient μ of a `separate` wall (default: the scene's `wall_friction`).
+        #[serde(default, with = "friction::optional")]
+        #[schemars(schema_with = "friction::optional_schema")]
+        friction: Option<Real>,
+    },
+    /// A plane through `point`, the material on the side `normal` points to (a floor's normal points up).
+    #[schemars(title = "PlaneWall")]
+    Plane {
+        /// A point of the plane.
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
+        point: [Real; 3],
+        /// Normal pointing into the material (any length but zero).
+        #[schemars(extend("unit" = "1", "unbounded" = true))]
+        normal: [Real; 3],
+        /// This wall's condition (default: the scene's `wall_condition`).
+        #[serde(default)]
+        condition: Option<WallCondition>,
+        /// Coulomb friction coefficient μ of a `separate` wall (default: the scene's `wall_friction`).
+        #[serde(default, with = "friction::optional")]
+        #[schemars(schema_with = "friction::optional_schema")]
+        friction: Option<Real>,
+    },
+    /// A sphere, material `outside` it (an obstacle, the default) or `inside` it (a container).
+    #[schemars(title = "SphereWall")]
+    Sphere {
+        /// Centre.
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
+        center: [Real; 3],
+        /// Radius.
+        #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "m"))]
+        radius: Real,
+        /// Where the material is: `outside` the sphere (an obstacle) or `inside` (a container).
+        #[serde(default = "default_side")]
+        side: SideSpec,
+        /// This wall's condition (default: the scene's `wall_condition`).
+        #[serde(default)]
+        condition: Option<WallCondition>,
+        /// Coulomb friction coefficient μ of a `separate` wall (default: the scene's `wall_friction`).
+        #[serde(default, with = "friction::optional")]
+        #[schemars(schema_with = "friction::optional_schema")]
+        friction: Option<Real>,
+    },
+    /// A capped cylinder, material `outside` it (an obstacle, the default) or `inside` it (a container).
+    #[schemars(title = "CylinderWall")]
+    Cylinder {
+        /// Centre of its axis.
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
+        center: [Real; 3],
+        /// Direction of its axis (any length but zero).
+        #[schemars(extend("unit" = "1", "unbounded" = true))]
+        axis: [Real; 3],
+        /// Radius.
+        #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "m"))]
+        radius: Real,
+        /// Length along the axis.
+        #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "m"))]
+        length: Real,
+        /// Where the material is: `outside` the cylinder (an obstacle) or `inside` (a container).
+        #[serde(default = "default_side")]
+        side: SideSpec,
+        /// This wall's condition (default: the scene's `wall_condition`).
+        #[serde(default)]
+        condition: Option<WallCondition>,
+        /// Coulomb friction coefficient μ of a `separate` wall (default: the scene's `wall_friction`).
+        #[serde(default, with = "friction::optional")]
+        #[schemars(schema_with = "friction::optional_schema")]
+        friction: Option<Real>,
+    },
+}
+
+fn z_axis() -> [Real; 3] {
+    [0.0, 0.0, 1.0]
+}
+
+impl Wall3Spec {
+    /// The wall's own condition and friction coefficient, if it names them.
+    fn contact_keys(&self) -> (Option<WallCondition>, Option<Real>) {
+        match self {
+            Wall3Spec::Box { condition, friction, .. }
+            | Wall3Spec::Plane { condition, friction, .. }
+            | Wall3Spec::Sphere { condition, friction, .. }
+            | Wall3Spec::Cylinder { condition, friction, .. } => (*condition, *friction),
+        }
+    }
+}
+
+/// Geometry of a 3D body.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(tag = "shape", rename_all = "lowercase")]
+pub enum Body3Shape {
+    /// An axis-aligned box.
+    #[schemars(title = "BoxBody3")]
+    Box {
+        /// Lowest corner.
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
+        min: [Real; 3],
+        /// Highest corner, beyond `min` along every axis.
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
+        max: [Real; 3],
+    },
+    /// A ball.
+    #[schemars(title = "SphereBody")]
+    Sphere {
+        /// Centre.
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
+        center: [Real; 3],
+        /// Radius.
+        #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "m"))]
+        radius: Real,
+    },
+    /// A capped cylinder.
+    #[schemars(title = "CylinderBody")]
+    Cylinder {
+        /// Centre of its axis.
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
+        center: [Real; 3],
+        /// Direction of its axis (any length but zero).
+        #[schemars(extend("unit" = "1", "unbounded" = true))]
+        axis: [Real; 3],
+        /// Radius.
+        #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "m"))]
+        radius: Real,
+        /// Length along the axis.
+        #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "m"))]
+        length: Real,
+    },
+}
+
+/// A body of material in 3D: a shape, its material, its initial velocity and how it is seeded (8
+/// particles per cell when the seeding names neither `spacing` nor `per_cell`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "Body3")]
+pub struct Body3Spec {
+    #[serde(flatten)]
+    pub shape: Body3Shape,
+    /// The body's material, chosen by `type`.
+    pub material: Material,
+    /// Initial velocity.
+    #[serde(default)]
+    #[schemars(extend("unit" = "m/s", "unbounded" = true))]
+    pub velocity: [Real; 3],
+    /// How particles are placed in the body (cubes of side `spacing`, or `per_cell` per cell).
+    #[serde(default)]
+    pub seeding: Seeding,
+    /// Seed only the part of the body inside the material region instead of refusing a body that
+    /// reaches past a wall.
+    #[serde(default)]
+    pub fill: bool,
+}
+
+/// A 3D scene: the grid, time stepping, walls and bodies, and how walls act on the grid.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+#[schemars(title = "Scene3")]
+pub struct Scene3 {
+    /// Name of the scene, shown in progress bars and reports.
+    #[serde(default)]
+    pub name: String,
+    /// Seed of the particle jitter; the same seed gives the same particles.
+    #[serde(default)]
+    #[schemars(extend("maximum" = 18_446_744_073_709_551_615u64, "unit" = "1"))]
+    pub seed: u64,
+    /// Gravity.
+    #[serde(default = "default_gravity")]
+    #[schemars(extend("unit" = "m/s²", "unbounded" = true))]
+    pub gravity: [Real; 3],
+    /// The background grid.
+    pub grid: Grid3Spec,
+    /// Time stepping.
+    pub time: TimeSpec,
+    /// How walls act on the grid.
+    #[serde(default)]
+    pub method: Method,
+    /// Condition of every wall (and the domain box) unless a wall names its own.
+    #[serde(default)]
+    pub wall_condition: WallCondition,
+    /// Coulomb friction coefficient μ of every `separate` wall unless a wall names its own.
+    #[serde(default, with = "friction")]
+    #[schemars(schema_with = "friction::schema")]
+    pub wall_friction: Real,
+    /// The walls besides the domain box: boxes, planes, spheres and cylinders.
+    #[serde(default)]
+    pub walls: Vec<Wall3Spec>,
+    /// The bodies of material: a run needs at least one.
+    #[serde(default)]
+    pub bodies: Vec<Body3Spec>,
+    /// Settings of the augmented grid (`method = "augmented"`).
+    #[serde(default)]
+    pub augmented: AugmentedSpec,
+    /// Floating-point precision of the engine.
+    #[serde(default)]
+    pub precision: Precision,
+}
+
+fn default_gravity() -> [Real; 3] {
+    [0.0, -9.81, 0.0]
+}
+
+fn p3(v: &[Real; 3]) -> P3 {
+    P3::new(v[0], v[1], v[2])
+}
+
+/// `v` normalised, or an error naming `key` when it has no length.
+fn direction(key: &str, v: &[Real; 3]) -> Result<P3, SceneError> {
+    let d = p3(v);
+    let n = d.norm();
+    if n > 0.0 && n.is_finite() {
+        Ok(d / n)
+    } else {
+        Err(SceneError::new(key, "must be a direction (a vector of non-zero, finite length)"))
+    }
+}
+
+impl Scene3 {
+    /// Parses the JSON form of a resolved 3D scene: checked against [`Scene3::schema`] first (an error
+    /// names the key), then by [`Scene3::validate`].
+    pub fn from_json(text: &str) -> Result<Self, SceneError> {
+        let value: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| SceneError::new("scene", format!("not valid JSON: {e}")))?;
+        crate::schema::check(Self::schema(), &value).map_err(|e| SceneError::new(e.key, e.reason))?;
+        let scene: Self = serde_json::from_value(value).map_err(|e| SceneError::new("scene", e.to_string()))?;
+        scene.validate()?;
+        Ok(scene)
+    }
+
+    /// The JSON Schema of 3D scenes, derived from these types.
+    pub fn schema() -> &'static serde_json::Value {
+        static SCHEMA: std::sync::OnceLock<serde_json::Value> = std::sync::OnceLock::new();
+        SCHEMA.get_or_init(|| serde_json::to_value(schemars::schema_for!(Scene3)).expect("the schema is JSON"))
+    }
+
+    /// Cell width h (m).
+    pub fn cell_size(&self) -> Real {
+        self.grid.domain[0] / self.grid.resolution as Real
+    }
+
+    /// Checks each key against [`Scene3::schema`], then the rules between keys: one of `time.dt` and
+    /// `time.cfl`, one of `time.steps` and `time.end`, whole numbers of cells, directions of non-zero
+    /// length, friction on separate walls only, boxes with `max` beyond `min`, the materials' rules.
+    pub fn validate(&self) -> Result<(), SceneError> {
+        let t = &self.time;
+        let optional = [("time.dt", t.dt), ("time.cfl", t.cfl), ("time.end", t.end)];
+        if let Some((key, v)) = optional.into_iter().find_map(|(k, v)| v.filter(|v| !v.is_finite()).map(|v| (k, v))) {
+            return Err(SceneError::new(key, format!("must be a finite number, got {v}")));
+        }
+        let value = serde_json::to_value(self).map_err(|e| SceneError::new("scene", e.to_string()))?;
+        crate::schema::check(Self::schema(), &value).map_err(|e| SceneError::new(e.key, e.reason))?;
+        self.layout()?;
+        if t.steps.is_some() == t.end.is_some() {
+            return Err(SceneError::new("time", "give exactly one of steps and end"));
+        }
+        if t.dt.is_some() == t.cfl.is_some() {
+            return Err(SceneError::new("time", "give exactly one of dt and cfl"));
+        }
+        let mut separate = self.wall_condition == WallCondition::Separate;
+        for (i, wall) in self.walls.iter().enumerate() {
+            let key = format!("walls[{i}]");
+            match wall {
+                Wall3Spec::Box { axis, .. } | Wall3Spec::Cylinder { axis, .. } => {
+                    direction(&format!("{key}.axis"), axis)?;
+                }
+                Wall3Spec::Plane { normal, .. } => {
+                    direction(&format!("{key}.normal"), normal)?;
+                }
+                Wall3Spec::Sphere { .. } => {}
+            }
+            let (condition, friction) = wall.contact_keys();
+            let condition = condition.unwrap_or(self.wall_condition);
+            if friction.is_some_and(|mu| mu > 0.0) && condition != WallCondition::Separate {
+                return Err(SceneError::new(
+                    format!("{key}.friction"),
+                    format!("friction acts on separate walls; this wall is {condition:?}").to_lowercase(),
+                ));
+            }
+            separate |= condition == WallCondition::Separate;
+        }
+        if self.wall_friction > 0.0 && !separate {
+            return Err(SceneError::new(
+                "wall_friction",
+                "friction acts on separate walls, and no wall (nor the domain box) is separate",
+            ));
+        }
+        for (b, body) in self.bodies.iter().enumerate() {
+            let key = format!("bodies[{b}]");
+            if body.seeding.spacing.is_some() && body.seeding.per_cell.is_some() {
+                return Err(SceneError::new(format!("{key}.seeding"), "give spacing or per_cell, not both"));
+            }
+            match &body.shape {
+                Body3Shape::Box { min, max } if (0..3).any(|k| max[k] <= min[k]) => {
+                    return Err(SceneError::new(format!("{key}.max"), "must exceed min along every axis"));
+                }
+                Body3Shape::Cylinder { axis, .. } => {
+                    direction(&format!("{key}.axis"), axis)?;
+                }
+                _ => {}
+            }
+            body.material.validate().map_err(|(k, reason)| SceneError::new(format!("{key}.material.{k}"), reason))?;
+        }
+        Ok(())
+    }
+
+    /// The grid: nodes at i·h, whole numbers of cells along y and z, at most [`MAX_GRID_NODES`] nodes.
+    pub fn layout(&self) -> Result<GridLayout<3>, SceneError> {
+        let g = &self.grid;
+        let h = self.cell_size();
+        let mut cells = [g.resolution; 3];
+        for (k, axis) in [(1, "height"), (2, "depth")] {
+            let n = g.domain[k] / h;
+            if !n.is_finite() || (n - n.round()).abs() > 1e-9 * n.max(1.0) || n.round() < 2.0 {
+                return Err(SceneError::new(
+                    "grid.domain",
+                    format!("{axis} {} is not a whole number (≥ 2) of cells of width {h}", g.domain[k]),
+                ));
+            }
+            cells[k] = n.round() as usize;
+        }
+        let nodes: Real = cells.iter().map(|&c| c as Real + 5.0).product();
+        if nodes > MAX_GRID_NODES as Real {
+            return Err(SceneError::new(
+                "grid.resolution",
+                format!("the grid would have {nodes:.3e} nodes; at most {MAX_GRID_NODES} are allowed"),
+            ));
+        }
+        Ok(GridLayout::new(h, cells))
+    }
+
+    /// The walls as a material region and each wall's contact, the domain box last.
+    fn walls(&self) -> Result<(Walls3, Vec<WallContact>), SceneError> {
+        let side = |s: &SideSpec| if *s == SideSpec::Inside { Side::Inside } else { Side::Outside };
+        let mut walls = Vec::new();
+        let mut contacts = Vec::new();
+        for (i, w) in self.walls.iter().enumerate() {
+            let key = format!("walls[{i}]");
+            let wall = match w {
+                Wall3Spec::Box { center, size, axis, angle, side: s, .. } => {
+                    let axis = nalgebra::Unit::new_normalize(direction(&format!("{key}.axis"), axis)?);
+                    let axes: Matrix<3> = nalgebra::Rotation3::from_axis_angle(&axis, *angle).into_inner();
+                    Wall3 { solid: Solid::Box { centre: p3(center), half: p3(size) * 0.5, axes }, side: side(s) }
+                }
+                Wall3Spec::Plane { point, normal, .. } => {
+                    // The half-space's normal points out of the material.
+                    let normal = -direction(&format!("{key}.normal"), normal)?;
+                    Wall3 { solid: Solid::HalfSpace { point: p3(point), normal }, side: Side::Inside }
+                }
+                Wall3Spec::Sphere { center, radius, side: s, .. } => {
+                    Wall3 { solid: Solid::Sphere { centre: p3(center), radius: *radius }, side: side(s) }
+                }
+                Wall3Spec::Cylinder { center, axis, radius, length, side: s, .. } => {
+                    let axis = direction(&format!("{key}.axis"), axis)?;
+                    let solid =
+                        Solid::Cylinder { centre: p3(center), axis, radius: *radius, half_length: 0.5 * length };
+                    Wall3 { solid, side: side(s) }
+                }
+            };
+            walls.push(wall);
+            let (condition, friction) = w.contact_keys();
+            contacts.push(self.contact(condition.unwrap_or(self.wall_condition), friction));
+        }
+        contacts.push(self.contact(self.wall_condition, None));
+        let extent = P3::from_fn(|k, _| self.grid.domain[k]);
+        Ok((Walls3::new(walls, extent), contacts))
+    }
+
+    /// How a wall of `condition` acts: its own friction, else the scene's (on separate walls).
+    fn contact(&self, condition: WallCondition, friction: Option<Real>) -> WallContact {
+        let friction = if condition == WallCondition::Separate { friction.unwrap_or(self.wall_friction) } else { 0.0 };
+        WallContact { condition, friction, moving: false }
+    }
+
+    /// Validates the scene and builds the simulation; returns warnings beside it.
+    pub fn build(&self, method: Method) -> Result<(Simulation<3>, Vec<String>), SceneError> {
+        if self.precision != Precision::NATIVE {
+            return Err(SceneError::new(
+                "precision",
+                format!("this engine runs {:?} scenes, not {:?}", Precision::NATIVE, self.precision),
+            ));
+        }
+        self.validate()?;
+        if self.bodies.is_empty() {
+            return Err(SceneError::new("bodies", "a scene needs at least one body"));
+        }
+        let layout = self.layout()?;
+        let h = layout.h;
+        let (region, contacts) = self.walls()?;
+        let boundary = match method {
+            Method::Naive => Boundary::Naive(NaiveBoundary::new(&layout, &region, contacts)),
+            Method::Augmented => {
+                let (delta, spacing) = (self.augmented.delta, self.augmented.spacing);
+                Boundary::Augmented(
+                    AugmentedGrid::new(&layout, &region, spacing * h, contacts, delta * h)
+                        .with_transfer(self.augmented.transfer),
+                )
+            }
+        };
+        let mut particles = Particles::<3>::default();
+        for (b, body) in self.bodies.iter().enumerate() {
+            let key = format!("bodies[{b}]");
+            let first = particles.len();
+            seed_body(&key, body, b, self.seed, h, &region, &mut particles)?;
+            let outside = (first..particles.len()).filter(|&p| region.distance(&particles.x[p]).distance > 0.0).count();
+            if outside > 0 {
+                return Err(SceneError::new(
+                    key,
+                    format!(
+                        "body lies partly or wholly outside the walls ({outside} of {} particles)",
+                        particles.len() - first
+                    ),
+                ));
+            }
+        }
+        let materials: Vec<Material> = self.bodies.iter().map(|b| b.material.clone()).collect();
+        let mut model = Model {
+            layout,
+            materials,
+            gravity: p3(&self.gravity),
+            region: Box::new(region),
+            boundary,
+            wall_fraction: None,
+            dt: 0.0,
+        };
+        let (dt, warning) = time_step(&self.time, model.stable_dt(), None, h)?;
+        model.dt = dt;
+        Ok((Simulation::new(model, particles), warning.into_iter().collect()))
+    }
+}
+
+/// Seeds one body on a jittered grid of cubes aligned with the domain origin (one random point per
+/// cube of side `spacing`; default h/2, 8 per cell); with `fill`, only the points inside `region`.
+fn seed_body(
+    key: &str,
+    body: &Body3Spec,
+    index: usize,
+    seed: u64,
+    h: Real,
+    region: &Walls3,
+    out: &mut Particles<3>,
+) -> Result<(), SceneError> {
+    let spacing = match (body.seeding.spacing, body.seeding.per_cell) {
+        (Some(s), None) => s,
+        (None, Some(n)) => h / (n as Real).cbrt(),
+        _ => h / 2.0,
+    };
+    let (solid, volume) = match &body.shape {
+        Body3Shape::Box { min, max } => {
+            let (lo, hi) = (p3(min), p3(max));
+            let solid = Solid::Box { centre: (lo + hi) * 0.5, half: (hi - lo) * 0.5, axes: Matrix::<3>::identity() };
+            (solid, (hi - lo).product())
+        }
+        Body3Shape::Sphere { center, radius } => {
+            (Solid::Sphere { centre: p3(center), radius: *radius }, 4.0 / 3.0 * crate::math::PI * radius.powi(3))
+        }
+        Body3Shape::Cylinder { center, axis, radius, length } => {
+            let axis = direction(&format!("{key}.axis"), axis)?;
+            let solid = Solid::Cylinder { centre: p3(center), axis, radius: *radius, half_length: 0.5 * length };
+            (solid, crate::math::PI * radius * radius * length)
+        }
+    };
+    // The bounding box of the solid: its distance along each axis from far away.
+    let reach = |dir: P3| {
+        let far = 1e3 * (1.0 + volume.cbrt());
+        let probe = match &solid {
+            Solid::Box { centre, .. } | Solid::Sphere { centre, .. } | Solid::Cylinder { centre, .. } => *centre,
+            Solid::HalfSpace { point, .. } => *point,
+        };
+        probe + dir * (far - solid.signed_distance(&(probe + dir * far)).0)
+    };
+    let lo = P3::from_fn(|k, _| reach(-P3::ith(k, 1.0))[k]);
+    let hi = P3::from_fn(|k, _| reach(P3::ith(k, 1.0))[k]);
+    let cells_f = ((hi - lo) / spacing).map(|c| c.ceil() + 1.0);
+    if cells_f.product() > MAX_SEED_CANDIDATES as Real {
+        return Err(SceneError::new(
+            format!("{key}.seeding"),
+            format!(
+                "would try about {:.3e} points (at most {MAX_SEED_CANDIDATES}); raise the spacing",
+                cells_f.product()
+            ),
+        ));
+    }
+    let cells = cells_f.map(|c| c as i64);
+    // One stream per body, so adding a body does not reshuffle the others.
+    let mut rng = Pcg64::seed_from_u64(seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    let first = (lo / spacing).map(|c| c.floor() as i64);
+    let mut positions = Vec::new();
+    for l in 0..cells.z {
+        for j in 0..cells.y {
+            for i in 0..cells.x {
+                let corner = P3::new((first.x + i) as Real, (first.y + j) as Real, (first.z + l) as Real) * spacing;
+                // Drawn in f64 in either precision, so that f32 and f64 scenes seed the same particles.
+                let jitter = P3::new(rng.gen::<f64>() as Real, rng.gen::<f64>() as Real, rng.gen::<f64>() as Real);
+                let p = corner + jitter * spacing;
+                if solid.signed_distance(&p).0 < 0.0 && !(body.fill && region.distance(&p).distance > 0.0) {
+                    positions.push(p);
+                }
+            }
+        }
+    }
+    if positions.is_empty() {
+        return Err(SceneError::new(
+            format!("{key}.seeding"),
+            format!("no particle was seeded (the body is smaller than the seeding spacing {spacing} m, or outside the walls)"),
+        ));
+    }
+    let n = positions.len() as Real;
+    let density = ConstitutiveModel::<3>::density(&body.material);
+    let (mass, vol0) = (volume * density / n, volume / n);
+    let v = p3(&body.velocity);
+    for p in positions {
+        out.push(p, v, mass, vol0, index as u32, index as u32);
+    }
+    Ok(())
+}
