@@ -10,13 +10,14 @@ Load a scene, build a simulation, step it::
 
 from augmpm._core import Error, SceneError, SimulationError, __version__
 from augmpm.run import RunResult, run_scene
-from augmpm.scene import Scene, apply_override, load_scene
+from augmpm.scene import Scene, Scene3, apply_override, load_scene
 from augmpm.simulation import Simulation
 
 __all__ = [
     "Error",
     "RunResult",
     "Scene",
+    "Scene3",
     "SceneError",
     "Simulation",
     "SimulationError",

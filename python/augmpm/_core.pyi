@@ -14,7 +14,10 @@ def scene_schema() -> str:
     """The JSON Schema of scene files: each key's type, doc, default, range and unit."""
 
 def check_scene(scene_json: str) -> None:
-    """Checks a resolved scene (JSON) as the engine does before building it; raises SceneError."""
+    """Checks a resolved scene (JSON, 2D or 3D) as the engine does before building it; raises SceneError."""
+
+def scene3_schema() -> str:
+    """The JSON Schema of 3D scene files: the keys of scene_schema() with three-component vectors."""
 
 def state_fields() -> list[dict[str, Any]]:
     """The per-particle arrays of a checkpoint: name, dtype, shape after the particle axis, unit, doc."""
@@ -56,6 +59,8 @@ class Simulation:
     ) -> None: ...
     @property
     def wall_impulse(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def dim(self) -> int: ...
     @property
     def positions(self) -> npt.NDArray[np.float64]: ...
     @property

@@ -181,7 +181,8 @@ def _compare(args: argparse.Namespace) -> int:
     )
     print(result.table())
     ext = "gif" if args.gif else "mp4"
-    print(f"written to {out}: naive/, augmented/, comparison.csv, comparison.png, comparison.{ext}")
+    animation = f", comparison.{ext}" if (out / f"comparison.{ext}").exists() else ""
+    print(f"written to {out}: naive/, augmented/, comparison.csv, comparison.png{animation}")
     failed = [m for m, r in result.runs.items() if r.error]
     for m in failed:
         print(f"augmpm: {m} run failed: {result.runs[m].error}", file=sys.stderr)

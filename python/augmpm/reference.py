@@ -8,9 +8,9 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from augmpm.scene import SCHEMA
+from augmpm.scene import SCHEMA, SCHEMA3
 
-_DEFS = SCHEMA["$defs"]
+_DEFS = {**SCHEMA3["$defs"], **SCHEMA["$defs"]}
 
 
 def _resolve(schema: dict[str, Any]) -> dict[str, Any]:
@@ -148,7 +148,15 @@ def _nested(path: str, properties: dict[str, Any], out: list[list[str]]) -> None
 
 
 def scene_reference() -> str:
-    """Every scene key, table by table: type, default, range, unit and doc line, from the schema."""
+    """Every scene key, table by table: type, default, range, unit and doc line, from the schemas; the
+    tables of 3D scenes that differ from the 2D ones follow, marked (3D)."""
     out: list[list[str]] = []
     _tables("", SCHEMA, out)
+    out3: list[list[str]] = []
+    _tables("", SCHEMA3, out3)
+    seen = {tuple(section) for section in out}
+    out.append(["#### 3D scenes", "", "A scene whose `grid.domain` has three components is 3D; its tables:", ""])
+    for section in out3:
+        if tuple(section) not in seen:
+            out.append([section[0] + " (3D)", *section[1:]])
     return "\n".join(line for section in out for line in section).rstrip() + "\n"

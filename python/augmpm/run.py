@@ -36,7 +36,7 @@ import numpy as np
 from augmpm import _core
 from augmpm.files import npz_bytes, output_dir, remove_stale_temporaries, write_bytes, write_npz, write_text
 from augmpm.render import FrameRenderer, write_animation
-from augmpm.scene import Scene, _plain_error
+from augmpm.scene import Scene, Scene3, _plain_error, scene_class
 from augmpm.simulation import Method, Simulation
 from augmpm.vtk import write_outlines_vtp, write_pvd, write_vtp
 
@@ -52,12 +52,12 @@ METRIC_COLUMNS = [
 ]
 
 
-def wall_force_columns(walls: int) -> list[str]:
+def wall_force_columns(walls: int, dim: int = 2) -> list[str]:
     """The columns of ``metrics.csv`` after :data:`METRIC_COLUMNS`: the mean force (N per metre of
-    depth) the material put on each of ``walls`` scene walls, then on the domain box, over the output
-    interval that ends at the row (0 in the first row)."""
+    depth in 2D, N in 3D) the material put on each of ``walls`` scene walls, then on the domain box,
+    over the output interval that ends at the row (0 in the first row); ``dim`` components each."""
     names = [*map(str, range(walls)), "box"]
-    return [f"wall_force_{w}_{axis}" for w in names for axis in ("x", "y")]
+    return [f"wall_force_{w}_{axis}" for w in names for axis in ("x", "y", "z")[:dim]]
 
 
 CHECKPOINT = "checkpoint.npz"
@@ -80,7 +80,7 @@ class RunResult:
 
 
 def run_scene(
-    scene: Scene,
+    scene: Scene | Scene3,
     out: str | Path,
     method: Method | None = None,
     steps: int | None = None,
@@ -149,7 +149,8 @@ def resume_run(
     every = meta.get("checkpoint_every", CHECKPOINT_EVERY) if checkpoint_every is None else checkpoint_every
     _check_every(every)
     try:
-        scene = Scene.model_validate_json(meta["scene"])
+        data = json.loads(meta["scene"])
+        scene = scene_class(data).model_validate(data)
     except ValueError as e:
         raise _plain_error("--resume", f"the checkpoint's scene is not valid: {e}") from None
     sim = Simulation(scene, meta["method"], threads=threads)
@@ -203,7 +204,7 @@ class _Run:
         # (vtk/walls/walls.vtp).
         outlines = sim.wall_outlines()
         self.walls = any(moving for _, moving in outlines)
-        self.columns = METRIC_COLUMNS + wall_force_columns(len(outlines))
+        self.columns = METRIC_COLUMNS + wall_force_columns(len(sim.wall_impulse) - 1, sim.dim)
         # The walls' impulses at the last row, from which the next row's forces are measured.
         self.impulse_at = (sim.wall_impulse.copy(), sim.time)
         self.wall_frames = [(t, f.replace("vtk/", "vtk/walls/")) for t, f in self.vtk_frames] if self.walls else []
@@ -218,7 +219,9 @@ class _Run:
         scene = sim.scene
         animation = meta["animation"] if meta["render"] else None
         renderer = None
-        if meta["render"]:
+        if meta["render"] and sim.dim == 3:
+            print("augmpm: 3D frames are not drawn yet; the particles (npz) and VTK are written", file=sys.stderr)
+        elif meta["render"]:
             # Frames go to the animation as they are drawn, so the PNGs are not read back at the end;
             # a resumed run encodes it from the PNGs instead, as the earlier frames are not in memory.
             stream = out / f"animation.{animation}" if animation and not self.resumed else None

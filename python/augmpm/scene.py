@@ -44,7 +44,11 @@ _NUMBER, _INTEGER = _typed("number"), _typed("integer")
 #: The JSON Schema of scene files, exported by the engine from the types that declare every key once
 #: (name, type, default, range, unit, doc line). The models below are built from it.
 SCHEMA: dict[str, Any] = json.loads(_core.scene_schema())
-_DEFS: dict[str, Any] = SCHEMA["$defs"]
+#: The JSON Schema of 3D scene files (``grid.domain`` with three components): the same keys with
+#: three-component vectors, and the 3D walls and bodies.
+SCHEMA3: dict[str, Any] = json.loads(_core.scene3_schema())
+# One table of types for both: the types they share are the same.
+_DEFS: dict[str, Any] = {**SCHEMA3["$defs"], **SCHEMA["$defs"]}
 
 
 class _Strict(BaseModel):
@@ -125,7 +129,13 @@ class _Scene(_Strict):
         return type(self).from_dict(data)
 
 
-_BASES: dict[str, type[_Strict]] = {"Scene": _Scene, "GridSpec": _Grid, "TimeSpec": _Time}
+_BASES: dict[str, type[_Strict]] = {
+    "Scene": _Scene,
+    "Scene3": _Scene,
+    "GridSpec": _Grid,
+    "Grid3Spec": _Grid,
+    "TimeSpec": _Time,
+}
 
 
 def _python_name(name: str) -> str:
@@ -258,6 +268,8 @@ def _model(name: str, schema: dict[str, Any], shared: dict[str, Any] | None = No
 
 
 Scene = _model("Scene", SCHEMA)
+#: A 3D scene: the keys of :class:`Scene` with three-component vectors, and the 3D walls and bodies.
+Scene3 = _model("Scene3", SCHEMA3)
 Grid, Time, Augmented, Seeding = (_MODELS[n] for n in ("Grid", "Time", "Augmented", "Seeding"))
 PolygonWall, CircleWall, PolylineWall = _MODELS["PolygonWall"], _MODELS["CircleWall"], _MODELS["PolylineWall"]
 PolygonBody, BoxBody, CircleBody = _MODELS["PolygonBody"], _MODELS["BoxBody"], _MODELS["CircleBody"]
@@ -294,10 +306,10 @@ def _format_loc(loc: tuple[Any, ...]) -> str:
     return key or "scene"
 
 
-def _scene_keys() -> set[str]:
+def _scene_keys(root: type[BaseModel]) -> set[str]:
     """Every key a scene's tables can hold (the fields of all its models)."""
     keys: set[str] = set()
-    pending: list[type[BaseModel]] = [Scene]
+    pending: list[type[BaseModel]] = [root]
     seen: set[type[BaseModel]] = set()
     while pending:
         model = pending.pop()
@@ -312,10 +324,10 @@ def _scene_keys() -> set[str]:
     return keys
 
 
-def _keys_at(loc: tuple[Any, ...]) -> set[str]:
+def _keys_at(loc: tuple[Any, ...], root: type[BaseModel]) -> set[str]:
     """The keys of the table at ``loc`` (a pydantic error location, list indices and choice tags
     included), or an empty set when the path leads to no single table."""
-    models: list[type[BaseModel]] = [Scene]
+    models: list[type[BaseModel]] = [root]
     for part in loc:
         if isinstance(part, int):
             continue
@@ -343,7 +355,9 @@ def _scene_error(e: ValidationError) -> SceneError:
     reason = first["msg"]
     if first["type"] == "extra_forbidden":
         reason = "unknown key"
-        keys = _keys_at(loc[:-1]) or _scene_keys()
+        # The scene's own table: a 3D scene's keys for a 3D scene.
+        root = Scene3 if e.title == "Scene3" else Scene
+        keys = _keys_at(loc[:-1], root) or _scene_keys(root)
         keys -= {str(loc[-1])} if loc else set()
         guess = difflib.get_close_matches(str(loc[-1]), keys, n=1, cutoff=0.75) if loc else []
         if guess:
@@ -441,4 +455,13 @@ def load_scene(path: str | Path, overrides: list[str] | None = None) -> Scene:
         raise _plain_error(str(path), f"not valid TOML: {e}") from None
     for item in overrides or []:
         apply_override(data, item)
-    return Scene.from_dict(data)
+    return scene_class(data).from_dict(data)
+
+
+def scene_class(data: Any) -> Any:
+    """:class:`Scene3` for a scene (a dict read from a file) whose ``grid.domain`` has three components,
+    else :class:`Scene`."""
+    domain = (
+        data.get("grid", {}).get("domain") if isinstance(data, dict) and isinstance(data.get("grid"), dict) else None
+    )
+    return Scene3 if isinstance(domain, list) and len(domain) == 3 else Scene

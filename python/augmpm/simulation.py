@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from augmpm import _core
-from augmpm.scene import Method, Scene, _plain_error, load_scene
+from augmpm.scene import Method, Scene, Scene3, _plain_error, load_scene
 
 
 class Simulation:
@@ -21,10 +21,12 @@ class Simulation:
     >>> sim.positions.shape  # (N, 2), metres
     """
 
-    def __init__(self, scene: Scene | str | Path, method: Method | None = None, threads: int | None = None) -> None:
-        if not isinstance(scene, (Scene, str, Path)):
+    def __init__(
+        self, scene: Scene | Scene3 | str | Path, method: Method | None = None, threads: int | None = None
+    ) -> None:
+        if not isinstance(scene, (Scene, Scene3, str, Path)):
             raise _plain_error("scene", f"must be a Scene or the path of a scene file, got {type(scene).__name__}")
-        if not isinstance(scene, Scene):
+        if not isinstance(scene, (Scene, Scene3)):
             scene = load_scene(scene)
         if method is None:
             method = scene.method
@@ -73,12 +75,12 @@ class Simulation:
 
     @property
     def positions(self) -> np.ndarray:
-        """Particle positions (m), shape (N, 2)."""
+        """Particle positions (m), shape (N, D): D = :attr:`dim`."""
         return self._sim.positions
 
     @property
     def velocities(self) -> np.ndarray:
-        """Particle velocities (m/s), shape (N, 2)."""
+        """Particle velocities (m/s), shape (N, D)."""
         return self._sim.velocities
 
     @property
@@ -158,13 +160,13 @@ class Simulation:
         return self._sim.wall_outlines()
 
     def wall_distance(self, points: np.ndarray) -> np.ndarray:
-        """Signed distance (m) of points (M, 2) to the walls, positive outside the material region."""
+        """Signed distance (m) of points (M, D) to the walls, positive outside the material region."""
         try:
             points = np.ascontiguousarray(points, dtype=np.float64)
         except (TypeError, ValueError) as e:
-            raise _plain_error("points", f"must be an (M, 2) array of numbers: {e}") from None
-        if points.ndim != 2 or points.shape[1] != 2:
-            raise _plain_error("points", f"must have shape (M, 2), got {points.shape}")
+            raise _plain_error("points", f"must be an (M, {self.dim}) array of numbers: {e}") from None
+        if points.ndim != 2 or points.shape[1] != self.dim:
+            raise _plain_error("points", f"must have shape (M, {self.dim}), got {points.shape}")
         return self._sim.wall_distance(points)
 
     def set_wall_pose(
@@ -194,6 +196,11 @@ class Simulation:
             _pair("velocity", velocity),
             _number("angular_velocity", angular_velocity),
         )
+
+    @property
+    def dim(self) -> int:
+        """Space dimension: 2, or 3 for a :class:`Scene3`."""
+        return self._sim.dim
 
     @property
     def wall_impulse(self) -> np.ndarray:

@@ -29,10 +29,10 @@ def _data_array(name: str, a: np.ndarray, components: int) -> str:
 
 
 def write_vtp(path: Path, x: np.ndarray, point_data: dict[str, np.ndarray]) -> None:
-    """Writes particles (N, 2) as vertices at z = 0 with per-point arrays."""
+    """Writes particles (N, 2) as vertices at z = 0 (or (N, 3) as they are) with per-point arrays."""
     n = len(x)
     points = np.zeros((n, 3))
-    points[:, :2] = x
+    points[:, : x.shape[1]] = x
     arrays = []
     for name, a in point_data.items():
         a = np.asarray(a)

@@ -10,8 +10,8 @@ use crate::material::{ConstitutiveModel, Material};
 use crate::math::{Matrix, Precision, Real, Vector};
 use crate::particles::Particles;
 use crate::scene::{
-    default_side, friction, inside, time_step, AugmentedSpec, SceneError, Seeding, SideSpec, TimeSpec, MAX_GRID_NODES,
-    MAX_SEED_CANDIDATES,
+    default_side, friction, inside, time_step, AugmentedSpec, MemoryEstimate, SceneError, Seeding, SideSpec, TimeSpec,
+    MAX_GRID_NODES, MAX_SEED_CANDIDATES,
 };
 use crate::simulation::{Model, Simulation};
 use crate::treatment::augmented::AugmentedGrid;
@@ -435,6 +435,43 @@ impl Scene3 {
         WallContact { condition, friction, moving: false }
     }
 
+    /// Estimates the memory the simulation of this scene will take, without building it: particles from
+    /// the bodies' volumes and seeding, the grid from its nodes.
+    pub fn memory_estimate(&self) -> Result<MemoryEstimate, SceneError> {
+        self.validate()?;
+        let layout = self.layout()?;
+        let nodes = layout.num_nodes() as u64;
+        let h = layout.h;
+        let mut particles = 0.0 as Real;
+        let mut largest = (0.0 as Real, None);
+        for (b, body) in self.bodies.iter().enumerate() {
+            let volume = match &body.shape {
+                Body3Shape::Box { min, max } => (p3(max) - p3(min)).product(),
+                Body3Shape::Sphere { radius, .. } => 4.0 / 3.0 * crate::math::PI * radius.powi(3),
+                Body3Shape::Cylinder { radius, length, .. } => crate::math::PI * radius * radius * length,
+            };
+            let domain: Real = self.grid.domain.iter().product();
+            let count = volume.min(domain) / seeding_spacing(body, h).powi(3);
+            particles += count;
+            if count > largest.0 {
+                largest = (count, Some(b));
+            }
+        }
+        // Per particle: the state and its scratch (as in 2D, for D = 3); per node: mass, spline mass,
+        // momentum (3), flags and the schedule's share.
+        let per_particle = (crate::simulation::State::<3>::bytes_per_particle()
+            + std::mem::size_of::<u32>()
+            + 4 * std::mem::size_of::<Real>()) as Real;
+        let (particle_bytes, grid_bytes) =
+            (particles * per_particle, nodes as Real * 9.0 * std::mem::size_of::<Real>() as Real);
+        let key = match largest.1 {
+            Some(b) if particle_bytes > grid_bytes => format!("bodies[{b}].seeding"),
+            _ => "grid.resolution".to_string(),
+        };
+        let saturate = |v: Real| if v >= u64::MAX as Real { u64::MAX } else { v as u64 };
+        Ok(MemoryEstimate { bytes: saturate(particle_bytes + grid_bytes), particles: saturate(particles), nodes, key })
+    }
+
     /// Validates the scene and builds the simulation; returns warnings beside it.
     pub fn build(&self, method: Method) -> Result<(Simulation<3>, Vec<String>), SceneError> {
         if self.precision != Precision::NATIVE {
@@ -492,6 +529,16 @@ impl Scene3 {
     }
 }
 
+/// The side (m) of the cubes that get one particle each: the seeding's `spacing`, or h/∛per_cell
+/// (default h/2: 8 per cell).
+fn seeding_spacing(body: &Body3Spec, h: Real) -> Real {
+    match (body.seeding.spacing, body.seeding.per_cell) {
+        (Some(s), None) => s,
+        (None, Some(n)) => h / (n as Real).cbrt(),
+        _ => h / 2.0,
+    }
+}
+
 /// Seeds one body on a jittered grid of cubes aligned with the domain origin (one random point per
 /// cube of side `spacing`; default h/2, 8 per cell); with `fill`, only the points inside `region`.
 fn seed_body(
@@ -503,11 +550,7 @@ fn seed_body(
     region: &Walls3,
     out: &mut Particles<3>,
 ) -> Result<(), SceneError> {
-    let spacing = match (body.seeding.spacing, body.seeding.per_cell) {
-        (Some(s), None) => s,
-        (None, Some(n)) => h / (n as Real).cbrt(),
-        _ => h / 2.0,
-    };
+    let spacing = seeding_spacing(body, h);
     let (solid, volume) = match &body.shape {
         Body3Shape::Box { min, max } => {
             let (lo, hi) = (p3(min), p3(max));

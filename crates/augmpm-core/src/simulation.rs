@@ -677,6 +677,9 @@ where
     /// number, a wall point that would jump or move more than one cell in a step, or a simulation that
     /// cannot follow moving walls (the paper's transfer, the corrected grid density).
     pub fn set_wall_pose(&mut self, wall: usize, pose: WallPose) -> Result<(), (&'static str, String)> {
+        if D != 2 {
+            return Err(("wall", "walls are posed in 2D scenes only (3D walls do not move yet)".into()));
+        }
         let walls = self.model.region.num_walls();
         if wall >= walls {
             return Err(("wall", format!("there is no wall {wall}; the scene has {walls} walls")));

@@ -33,6 +33,14 @@ pub fn rows<const D: usize>(a: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<SVect
     Ok(a.rows().into_iter().map(|r| SVector::<f64, D>::from_fn(|i, _| r[i])).collect())
 }
 
+/// As [`rows`], with D that of `_like` (vectors of a simulation of either precision).
+pub fn rows_like<T: nalgebra::Scalar, const D: usize>(
+    _like: &[SVector<T, D>],
+    a: &PyReadonlyArray2<'_, f64>,
+) -> PyResult<Vec<SVector<f64, D>>> {
+    rows::<D>(a)
+}
+
 /// An (N, D) float64 array of vectors of either precision.
 pub fn vectors_to_array<'py, R: nalgebra::Scalar + Copy + Into<f64>, const D: usize>(
     py: Python<'py>,

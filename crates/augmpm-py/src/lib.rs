@@ -43,6 +43,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(_panic, m)?)?;
     m.add_function(wrap_pyfunction!(scene::scene_schema, m)?)?;
     m.add_function(wrap_pyfunction!(scene::check_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(scene::scene3_schema, m)?)?;
     m.add_function(wrap_pyfunction!(checkpoint::state_fields, m)?)?;
     m.add_class::<simulation::PySimulation>()?;
     m.add_class::<grid::PyGrid>()?;

@@ -1,19 +1,22 @@
-//! `augmpm._core.Simulation`: a 2D simulation built from a resolved scene (JSON), in the scene's
-//! precision; steps, arrays of the particles, metrics, checkpoints.
+//! `augmpm._core.Simulation`: a 2D or 3D simulation built from a resolved scene (JSON; 3D when
+//! `grid.domain` has three components), in the scene's precision; steps, arrays of the particles,
+//! metrics, checkpoints.
 
 use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::checkpoint;
-use crate::convert::{parse_method, rows, scalars_to_array, vectors_to_array, wide};
+use crate::convert::{parse_method, rows_like, scalars_to_array, vectors_to_array, wide};
 use crate::errors::{self, guard, scene_error, simulation_error};
 
-/// The engine of a simulation, in the scene's precision: the same core sources compiled with
-/// `Real = f64` (`augmpm-core`) or `Real = f32` (`augmpm-core-f32`).
+/// The engine of a simulation, in the scene's precision and dimension: the same core sources compiled
+/// with `Real = f64` (`augmpm-core`) or `Real = f32` (`augmpm-core-f32`), for D = 2 or 3.
 enum Engine {
     F64(augmpm_core::Simulation<2>),
     F32(augmpm_core_f32::Simulation<2>),
+    F64D3(augmpm_core::Simulation<3>),
+    F32D3(augmpm_core_f32::Simulation<3>),
 }
 
 /// Runs `$body` on the simulation of either precision, with `$core` naming its crate.
@@ -30,8 +33,23 @@ macro_rules! with_sim {
                 use augmpm_core_f32 as $core;
                 $body
             }
+            Engine::F64D3($s) => {
+                #[allow(unused_imports)]
+                use augmpm_core as $core;
+                $body
+            }
+            Engine::F32D3($s) => {
+                #[allow(unused_imports)]
+                use augmpm_core_f32 as $core;
+                $body
+            }
         }
     };
+}
+
+/// Whether a scene (JSON value) is 3D: its `grid.domain` has three components.
+pub fn is_3d(value: &serde_json::Value) -> bool {
+    value.pointer("/grid/domain").and_then(|d| d.as_array()).is_some_and(|d| d.len() == 3)
 }
 
 /// A 2D simulation built from a resolved scene (JSON) with a boundary method.
@@ -50,8 +68,27 @@ impl PySimulation {
             serde_json::from_str(scene_json).map_err(|e| scene_error("scene", &format!("not valid JSON: {e}")))?;
         let bad = |e: augmpm_core::SceneError| scene_error(&e.key, &e.reason);
         let bad32 = |e: augmpm_core_f32::SceneError| scene_error(&e.key, &e.reason);
-        let (engine, warnings) = match value.get("precision").and_then(|p| p.as_str()).unwrap_or("f64") {
-            "f32" => {
+        let f32 = value.get("precision").and_then(|p| p.as_str()) == Some("f32");
+        let (engine, warnings) = match (f32, is_3d(&value)) {
+            (false, true) => {
+                let scene = augmpm_core::scene3::Scene3::from_json(scene_json).map_err(bad)?;
+                if let Some(limit) = memory_limit {
+                    scene.memory_estimate().and_then(|m| m.check(limit)).map_err(bad)?;
+                }
+                let (sim, warnings) = scene.build(parse_method(method)?).map_err(bad)?;
+                (Engine::F64D3(sim), warnings)
+            }
+            (true, true) => {
+                let scene = augmpm_core_f32::scene3::Scene3::from_json(scene_json).map_err(bad32)?;
+                if let Some(limit) = memory_limit {
+                    scene.memory_estimate().and_then(|m| m.check(limit)).map_err(bad32)?;
+                }
+                let method =
+                    if method == "naive" { augmpm_core_f32::Method::Naive } else { augmpm_core_f32::Method::Augmented };
+                let (sim, warnings) = scene.build(method).map_err(bad32)?;
+                (Engine::F32D3(sim), warnings)
+            }
+            (true, false) => {
                 let scene = augmpm_core_f32::Scene::from_json(scene_json).map_err(bad32)?;
                 if let Some(limit) = memory_limit {
                     scene.memory_estimate().and_then(|m| m.check(limit)).map_err(bad32)?;
@@ -61,7 +98,7 @@ impl PySimulation {
                 let (sim, warnings) = scene.build(method).map_err(bad32)?;
                 (Engine::F32(sim), warnings)
             }
-            _ => {
+            (false, false) => {
                 let scene = augmpm_core::Scene::from_json(scene_json).map_err(bad)?;
                 if let Some(limit) = memory_limit {
                     scene.memory_estimate().and_then(|m| m.check(limit)).map_err(bad)?;
@@ -111,6 +148,8 @@ impl PySimulation {
         self.guarded(|engine| match engine {
             Engine::F64(s) => checkpoint::double::to_dict(py, s.state()),
             Engine::F32(s) => checkpoint::single::to_dict(py, s.state()),
+            Engine::F64D3(s) => checkpoint::double::to_dict(py, s.state()),
+            Engine::F32D3(s) => checkpoint::single::to_dict(py, s.state()),
         })
     }
 
@@ -122,6 +161,8 @@ impl PySimulation {
             match engine {
                 Engine::F64(s) => s.restore(checkpoint::double::from_dict(state)?),
                 Engine::F32(s) => s.restore(checkpoint::single::from_dict(state)?),
+                Engine::F64D3(s) => s.restore(checkpoint::double::from_dict(state)?),
+                Engine::F32D3(s) => s.restore(checkpoint::single::from_dict(state)?),
             }
             .map_err(|e| scene_error("state", &e))
         })
@@ -131,8 +172,8 @@ impl PySimulation {
     #[getter]
     fn precision(&self) -> &'static str {
         match self.engine {
-            Engine::F64(_) => "f64",
-            Engine::F32(_) => "f32",
+            Engine::F64(_) | Engine::F64D3(_) => "f64",
+            Engine::F32(_) | Engine::F32D3(_) => "f32",
         }
     }
 
@@ -186,13 +227,13 @@ impl PySimulation {
         })
     }
 
-    /// Particle positions (m), shape (N, 2).
+    /// Particle positions (m), shape (N, D).
     #[getter]
     fn positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         guard(|| with_sim!(&self.engine, s, core => vectors_to_array(py, &s.particles().x)))
     }
 
-    /// Particle velocities (m/s), shape (N, 2).
+    /// Particle velocities (m/s), shape (N, D).
     #[getter]
     fn velocities<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         guard(|| with_sim!(&self.engine, s, core => vectors_to_array(py, &s.particles().v)))
@@ -261,23 +302,34 @@ impl PySimulation {
         self.warnings.clone()
     }
 
-    /// Signed distance (m) of points (M, 2) to the walls, positive outside the material region.
+    /// Space dimension of the simulation: 2 or 3.
+    #[getter]
+    fn dim(&self) -> usize {
+        match self.engine {
+            Engine::F64(_) | Engine::F32(_) => 2,
+            Engine::F64D3(_) | Engine::F32D3(_) => 3,
+        }
+    }
+
+    /// Signed distance (m) of points (M, D) to the walls, positive outside the material region.
     fn wall_distance<'py>(
         &self,
         py: Python<'py>,
         points: numpy::PyReadonlyArray2<'py, f64>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let points = rows::<2>(&points)?;
         guard(|| {
             let d: Vec<f64> = with_sim!(&self.engine, s, core => {
                 let region = s.model.region.as_ref();
-                points.iter().map(|x| wide(region.distance(&x.cast::<core::math::Real>()).distance)).collect()
+                rows_like(&s.particles().x, &points)?
+                    .iter()
+                    .map(|x| wide(region.distance(&x.cast::<core::math::Real>()).distance))
+                    .collect()
             });
             Ok(PyArray1::from_vec(py, d))
         })
     }
 
-    /// Boundary grid points of the augmented grid, shape (B, 2); empty for the naive method.
+    /// Boundary grid points of the augmented grid, shape (B, D); empty for the naive method.
     #[getter]
     fn boundary_points<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         guard(|| {
