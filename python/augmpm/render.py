@@ -26,6 +26,7 @@ import zlib
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 import numpy as np
@@ -54,6 +55,61 @@ _WRITER_NICE = 5
 def _closed_path(vertices: np.ndarray) -> matplotlib.path.Path:
     # A closed Path ignores its last vertex (the CLOSEPOLY slot), so repeat the first.
     return matplotlib.path.Path(np.vstack([vertices, vertices[:1]]), closed=True)
+
+
+class _Camera:
+    """An orthographic view of the 3D domain box [0, L] from the direction ``VIEW`` (up the image: +y),
+    fitted into a ``width`` × ``height`` px image with a 4% margin."""
+
+    #: From where the box is seen: right, above and in front of it.
+    VIEW = np.array([0.8, 0.6, 1.5]) / np.linalg.norm([0.8, 0.6, 1.5])
+
+    def __init__(self, extent: tuple[float, float, float], width: int, height: int) -> None:
+        self.right = np.cross([0.0, 1.0, 0.0], self.VIEW)
+        self.right /= np.linalg.norm(self.right)
+        self.up = np.cross(self.VIEW, self.right)
+        corners = np.array(
+            [[i * extent[0], j * extent[1], k * extent[2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+        )
+        uv = np.column_stack([corners @ self.right, corners @ self.up])
+        self.lo, span = uv.min(axis=0), np.ptp(uv, axis=0)
+        self.scale = 0.92 * min(width / span[0], height / span[1])
+        self.offset = (np.array([width, height]) - span * self.scale) / 2
+        self.height = height
+        depth = corners @ self.VIEW
+        self.near, self.far = depth.max(), depth.min()
+        self.edges = [(a, b) for a in range(8) for b in range(a + 1, 8) if bin(a ^ b).count("1") == 1]
+        self.corners = corners
+
+    def to_pixel(self, x: np.ndarray) -> np.ndarray:
+        """Positions (N, 3) in m to image coordinates (column, row) in px, row 0 at the top."""
+        x = np.asarray(x, dtype=float).reshape(-1, 3)
+        d = (np.column_stack([x @ self.right, x @ self.up]) - self.lo) * self.scale + self.offset
+        return np.column_stack([d[:, 0], self.height - d[:, 1]])
+
+    def nearness(self, x: np.ndarray) -> np.ndarray:
+        """0 at the far corner of the box, 1 at the near one."""
+        return np.clip(
+            (np.asarray(x, dtype=float).reshape(-1, 3) @ self.VIEW - self.far) / (self.near - self.far), 0, 1
+        )
+
+
+def _draw_background_3d(scene: Any, size_px: int, walls: np.ndarray | None) -> tuple[np.ndarray, _Camera]:
+    """A 3D frame's background: white, the domain box's edges and the walls' surface points (grey, darker
+    nearer the viewer); and its camera."""
+    width, height = size_px, (size_px // 16) * 16
+    camera = _Camera(tuple(scene.grid.domain), width, height)
+    canvas = Image.new("RGB", (width, height), (255, 255, 255))
+    pen = ImageDraw.Draw(canvas)
+    if walls is not None and len(walls):
+        order = np.argsort(camera.nearness(walls))
+        p, grey = camera.to_pixel(walls[order]), (215 - 70 * camera.nearness(walls[order])).astype(int)
+        for (c, r), g in zip(p, grey, strict=True):
+            pen.point((float(c), float(r)), fill=(int(g), int(g), int(g)))
+    corners = camera.to_pixel(camera.corners)
+    for a, b in camera.edges:
+        pen.line([tuple(corners[a]), tuple(corners[b])], fill=(51, 51, 51), width=1)
+    return np.asarray(canvas).copy(), camera
 
 
 def image_size(scene: Scene, size_px: int = 640) -> tuple[int, int]:
@@ -206,15 +262,24 @@ class FrameRenderer:
         animation: Path | None = None,
         fps: int = 20,
         outlines: list[np.ndarray] | None = None,
+        surface: np.ndarray | None = None,
     ) -> None:
-        self.background, self._scale, self._offset = _draw_background(scene, size_px, outlines)
-        # Which moving walls are obstacles (material outside them; a polyline always): drawn filled, as the
-        # still ones.
-        self._filled = [getattr(w, "side", "outside") == "outside" for w in scene.walls if w.motion is not None]
+        self._camera: _Camera | None = None
+        if len(scene.grid.domain) == 3:
+            # 3D: seen from one side (orthographic), the walls as their surface points (``surface``, (P, 3)
+            # m), particles shaded by depth and drawn far to near.
+            self.background, self._camera = _draw_background_3d(scene, size_px, surface)
+            self._filled = []
+            self._text_at = (6.0, 4.0)
+        else:
+            self.background, self._scale, self._offset = _draw_background(scene, size_px, outlines)
+            # Which moving walls are obstacles (material outside them; a polyline always): drawn filled, as
+            # the still ones.
+            self._filled = [getattr(w, "side", "outside") == "outside" for w in scene.walls if w.motion is not None]
+            lx, ly = scene.grid.domain
+            # The caption's top-left corner at (0.01 lx, 0.99 ly), as before; 14 px is 10 pt at 100 dpi.
+            self._text_at = tuple(self.to_pixel(np.array([[0.01 * lx, 0.99 * ly]]))[0])
         self.title = title
-        lx, ly = scene.grid.domain
-        # The caption's top-left corner at (0.01 lx, 0.99 ly), as before; 14 px is 10 pt at 100 dpi.
-        self._text_at = tuple(self.to_pixel(np.array([[0.01 * lx, 0.99 * ly]]))[0])
         self._font = ImageFont.load_default(size=14)
         # Offsets from a particle's pixel to the pixels whose centre can lie within DOT_RADIUS_PX of it.
         r = int(np.ceil(DOT_RADIUS_PX))
@@ -233,7 +298,10 @@ class FrameRenderer:
             self._animation = _open_writer(self._animation_partial, fps)
 
     def to_pixel(self, x: np.ndarray) -> np.ndarray:
-        """World positions (N, 2) in m to image coordinates (column, row) in px, row 0 at the top."""
+        """World positions (N, 2), or (N, 3) in 3D, in m to image coordinates (column, row) in px, row 0 at
+        the top."""
+        if self._camera is not None:
+            return self._camera.to_pixel(x)
         d = np.asarray(x, dtype=float).reshape(-1, 2) * self._scale + self._offset
         return np.column_stack([d[:, 0], self.background.shape[0] - d[:, 1]])
 
@@ -251,9 +319,18 @@ class FrameRenderer:
         if walls:
             top, bottom = self._outlines(img, walls)
             changed[top // _BandPng.BAND : -(-bottom // _BandPng.BAND)] = True
-        x = np.asarray(x, dtype=float).reshape(-1, 2)
+        dim = 3 if self._camera is not None else 2
+        x = np.asarray(x, dtype=float).reshape(-1, dim)
         finite = np.isfinite(x).all(axis=1)
-        p = self.to_pixel(x[finite])
+        colours = COLOURS[np.asarray(body)[finite] % len(COLOURS)]
+        x = x[finite]
+        if self._camera is not None:
+            # Far to near, so that the nearer particles cover the farther; farther ones darker.
+            near = self._camera.nearness(x)
+            order = np.argsort(near, kind="stable")
+            x, near = x[order], near[order]
+            colours = (colours[order] * (0.45 + 0.55 * near)[:, None]).astype(np.uint8)
+        p = self.to_pixel(x)
         base = np.floor(p)
         frac = p - base  # position inside the particle's pixel, in [0, 1)
         d2 = (self._dc + 0.5 - frac[:, :1]) ** 2 + (self._dr + 0.5 - frac[:, 1:]) ** 2
@@ -262,7 +339,6 @@ class FrameRenderer:
         rows = base[i, 1].astype(np.int64) + self._dr[k]
         inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
         rows, cols = rows[inside], cols[inside]
-        colours = COLOURS[np.asarray(body)[finite] % len(COLOURS)]
         img.reshape(-1, 3)[rows * w + cols] = colours[i[inside]]
         changed[rows // _BandPng.BAND] = True
         top, bottom = self._caption(img, f"{self.title}  t = {time:.4f} s".strip())

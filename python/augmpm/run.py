@@ -219,14 +219,15 @@ class _Run:
         scene = sim.scene
         animation = meta["animation"] if meta["render"] else None
         renderer = None
-        if meta["render"] and sim.dim == 3:
-            print("augmpm: 3D frames are not drawn yet; the particles (npz) and VTK are written", file=sys.stderr)
-        elif meta["render"]:
+        if meta["render"]:
             # Frames go to the animation as they are drawn, so the PNGs are not read back at the end;
             # a resumed run encodes it from the PNGs instead, as the earlier frames are not in memory.
             stream = out / f"animation.{animation}" if animation and not self.resumed else None
             outlines = [outline for outline, _ in sim.wall_outlines()]
-            renderer = FrameRenderer(scene, title=f"{scene.name} ({sim.method})", animation=stream, outlines=outlines)
+            # 3D: the walls drawn as points on them, half a cell apart.
+            surface = sim.wall_points(0.5 * sim.cell_size) if sim.dim == 3 else None
+            title = f"{scene.name} ({sim.method})"
+            renderer = FrameRenderer(scene, title=title, animation=stream, outlines=outlines, surface=surface)
         self.renderer = renderer
         error, failure = None, None
         start = wallclock.perf_counter()

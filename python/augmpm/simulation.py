@@ -159,6 +159,11 @@ class Simulation:
         of its closed outline (a circle as 64 points), and whether it moves."""
         return self._sim.wall_outlines()
 
+    def wall_points(self, spacing: float) -> np.ndarray:
+        """Points on the walls where they are now (the domain box's included), at most ``spacing`` (m)
+        apart (at least a quarter cell), shape (P, :attr:`dim`): what a 3D frame draws of the walls."""
+        return self._sim.wall_points(_number("spacing", spacing))
+
     def wall_distance(self, points: np.ndarray) -> np.ndarray:
         """Signed distance (m) of points (M, D) to the walls, positive outside the material region."""
         try:

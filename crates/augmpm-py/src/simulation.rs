@@ -341,6 +341,21 @@ impl PySimulation {
         })
     }
 
+    /// Points on the walls where they are now (the domain box's included), at most `spacing` (m) apart,
+    /// shape (P, D): what a 3D frame draws of the walls, for either method.
+    fn wall_points<'py>(&self, py: Python<'py>, spacing: f64) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        if !(spacing.is_finite() && spacing > 0.0) {
+            return Err(scene_error("spacing", &format!("must be a positive number, got {spacing}")));
+        }
+        guard(|| {
+            with_sim!(&self.engine, s, core => {
+                let spacing = (spacing as core::math::Real).max(s.model.layout.h * 0.25);
+                let xs: Vec<_> = s.model.region.boundary_points(spacing).iter().map(|p| p.x).collect();
+                vectors_to_array(py, &xs)
+            })
+        })
+    }
+
     /// Each scene wall where it is now (moving walls follow their motion), as an (M, 2) array of the
     /// vertices of its closed outline (a circle as 64 points), and whether it moves.
     fn wall_outlines<'py>(&self, py: Python<'py>) -> PyResult<Vec<(Bound<'py, PyArray2<f64>>, bool)>> {
