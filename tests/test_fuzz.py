@@ -41,7 +41,7 @@ from hypothesis import strategies as st
 from pydantic import BaseModel
 
 import augmpm
-from augmpm.scene import Scene
+from augmpm.scene import Scene, Scene3, scene_class
 
 from .conftest import _SMALL, ROOT
 
@@ -174,7 +174,43 @@ radius = 0.12
 material = {type = "fluid", density = 1000.0, stiffness = 1e4}
 """)
 
-BASES = {"small": _SMALL, "fluid": _FLUID, "circle": _CIRCLE, "multi": _MULTI}
+_TANK3D = tomllib.loads("""
+name = "tank3d"
+gravity = [0.0, -9.81, 0.0]
+grid = {domain = [1.0, 1.0, 1.0], resolution = 8}
+time = {dt = 5e-4, steps = 10, output_interval = 5}
+wall_condition = "separate"
+wall_friction = 0.2
+
+[[walls]]
+type = "box"
+center = [0.5, 0.45, 0.5]
+size = [0.8, 0.7, 0.8]
+axis = [1.0, 0.3, 0.2]
+angle = 0.3
+
+[[walls]]
+type = "sphere"
+center = [0.5, 0.3, 0.5]
+radius = 0.1
+
+[[walls]]
+type = "cylinder"
+center = [0.3, 0.5, 0.7]
+axis = [0.0, 1.0, 0.0]
+radius = 0.05
+length = 0.3
+
+[[bodies]]
+shape = "cylinder"
+center = [0.5, 0.6, 0.5]
+axis = [0.0, 1.0, 0.0]
+radius = 0.12
+length = 0.1
+material = {type = "snow", density = 400.0, youngs_modulus = 1e4, poisson_ratio = 0.2}
+""")
+
+BASES = {"small": _SMALL, "fluid": _FLUID, "circle": _CIRCLE, "multi": _MULTI, "tank3d": _TANK3D}
 
 
 # --- paths into a scene dict ----------------------------------------------------------------------------
@@ -518,7 +554,7 @@ def _schema_keys(model: type[BaseModel], seen: set | None = None) -> set[str]:
     return names
 
 
-SCHEMA_KEYS = _schema_keys(Scene)
+SCHEMA_KEYS = _schema_keys(Scene) | _schema_keys(Scene3)
 
 
 def _names_a_key(key: str, data: dict) -> bool:
@@ -573,19 +609,23 @@ def _differs(given: object, loaded: object, key: str = "") -> str:
     return "" if type(given) is type(loaded) and given == loaded else key
 
 
-def _cost(scene: Scene) -> tuple[float, float]:
+def _cost(scene: Scene | Scene3) -> tuple[float, float]:
     """Grid nodes and the largest body's seeding candidates, as the engine counts them (before refusing)."""
     g = scene.grid
     h = g.cell_size
-    nodes = (g.resolution + 5) * (round(g.domain[1] / h) + 5)
+    dim = len(g.domain)
+    with np.errstate(all="ignore"):
+        nodes = float(np.prod([g.resolution + 5] + [round(g.domain[k] / h) + 5 for k in range(1, dim)]))
     worst = 0.0
     for body in scene.bodies:
         s = body.seeding
-        spacing = s.spacing or (h / math.sqrt(s.per_cell) if s.per_cell else h / 2)
+        spacing = s.spacing or (h / s.per_cell ** (1 / dim) if s.per_cell else h / 2)
         if body.shape == "box":
-            size = [body.max[k] - body.min[k] for k in range(2)]
-        elif body.shape == "circle":
-            size = [2 * body.radius] * 2
+            size = [body.max[k] - body.min[k] for k in range(dim)]
+        elif body.shape in ("circle", "sphere"):
+            size = [2 * body.radius] * dim
+        elif body.shape == "cylinder":
+            size = [2 * body.radius + body.length] * dim
         else:
             size = [
                 body.scale * (max(v[k] for v in body.vertices) - min(v[k] for v in body.vertices)) for k in range(2)
@@ -618,7 +658,7 @@ def run_case(data: dict, workdir: Path, as_toml: bool = True) -> tuple[list[str]
             path.write_text(tomli_w.dumps(data), encoding="utf-8")
             scene = augmpm.load_scene(path)
         else:
-            scene = Scene.from_dict(data)
+            scene = scene_class(data).from_dict(data)
     except augmpm.SceneError as e:
         return [p for p in [_key_problem(e, data, load)] if p], f"refused at load: {e.key}"
     if where := _differs(data, scene.to_dict()):

@@ -124,3 +124,27 @@ def test_bad_3d_scenes_are_refused_naming_the_key(change, key):
     assert e.value.key.startswith(key)
     if key.endswith("axs"):
         assert "did you mean 'axis'" in str(e.value)
+
+
+def test_3d_results_do_not_depend_on_the_thread_count():
+    """A 3D run of 4,700 particles (above the size that stays on one thread) reaches bitwise the same
+    state on one thread and on two."""
+    water = _tank()["bodies"][0]["material"]
+    body = {"shape": "box", "min": [0.35, 0.4, 0.35], "max": [0.65, 0.6, 0.65], "material": water}
+    scene = augmpm.Scene3.from_dict(_tank(grid={"domain": [1.0, 1.0, 1.0], "resolution": 32}, bodies=[body]))
+    runs = []
+    for threads in (1, 2):
+        sim = augmpm.Simulation(scene, threads=threads)
+        assert sim.num_particles > 4096
+        sim.step(40)
+        runs.append((sim.positions, sim.velocities))
+    assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
+
+
+def test_a_3d_scene_beyond_the_memory_limit_is_refused(monkeypatch):
+    """With AUGMPM_MEMORY_LIMIT below a 3D scene's estimate, building it raises SceneError naming the key
+    that drives the estimate, before allocating."""
+    monkeypatch.setenv("AUGMPM_MEMORY_LIMIT", "1M")
+    with pytest.raises(augmpm.SceneError) as e:
+        augmpm.Simulation(augmpm.Scene3.from_dict(_tank(grid={"domain": [1.0, 1.0, 1.0], "resolution": 64})))
+    assert e.value.key in ("grid.resolution", "bodies[0].seeding")

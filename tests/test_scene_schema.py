@@ -13,7 +13,7 @@ import pytest
 import augmpm
 from augmpm import _core
 from augmpm.reference import scene_reference
-from augmpm.scene import SCHEMA, Scene
+from augmpm.scene import SCHEMA, SCHEMA3, Scene, Scene3
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 
@@ -50,9 +50,39 @@ def _scenes() -> list[dict[str, Any]]:
     return scenes
 
 
+_BODIES3 = [
+    {"shape": "box", "min": [0.3, 0.3, 0.3], "max": [0.5, 0.5, 0.5]},
+    {"shape": "sphere", "center": [0.4, 0.4, 0.4], "radius": 0.1},
+    {"shape": "cylinder", "center": [0.4, 0.4, 0.4], "axis": [0.0, 1.0, 0.0], "radius": 0.1, "length": 0.2},
+    {"shape": "box", "min": [0.3, 0.3, 0.3], "max": [0.5, 0.5, 0.5]},
+]
+_WALLS3 = [
+    {"type": "box", "center": [0.5, 0.5, 0.5], "size": [0.9, 0.9, 0.9], "axis": [1.0, 1.0, 0.0], "angle": 0.1},
+    {"type": "plane", "point": [0.5, 0.1, 0.5], "normal": [0.0, 1.0, 0.1]},
+    {"type": "sphere", "center": [0.8, 0.8, 0.8], "radius": 0.05},
+    {"type": "cylinder", "center": [0.2, 0.8, 0.2], "axis": [0.0, 0.0, 1.0], "radius": 0.05, "length": 0.1},
+]
+
+
+def _scenes3() -> list[dict[str, Any]]:
+    """Valid 3D scenes that together hold every kind of table the 3D schema declares."""
+    return [
+        {
+            "grid": {"domain": [1.0, 1.0, 1.0], "resolution": 8},
+            "time": {"dt": 1e-4, "steps": 2, "output_interval": 1},
+            "walls": copy.deepcopy(_WALLS3),
+            "bodies": [{**copy.deepcopy(body), "material": dict(material), "seeding": {"per_cell": 8}}],
+        }
+        for material, body in zip(_MATERIALS.values(), _BODIES3, strict=True)
+    ]
+
+
 def _resolve(schema: dict[str, Any]) -> dict[str, Any]:
     ref = schema.get("$ref")
-    return {**SCHEMA["$defs"][ref.rsplit("/", 1)[-1]], **schema} if ref else schema
+    return {**_DEFS[ref.rsplit("/", 1)[-1]], **schema} if ref else schema
+
+
+_DEFS = {**SCHEMA3["$defs"], **SCHEMA["$defs"]}
 
 
 def _bounded_leaves(schema: dict[str, Any], value: Any, path: list[Any]):
@@ -104,17 +134,18 @@ def _set(data: dict[str, Any], path: list[Any], value: Any) -> str:
     return "".join(f"[{p}]" if isinstance(p, int) else (f".{p}" if i else p) for i, p in enumerate(path))
 
 
-def _cases() -> list[tuple[str, dict[str, Any], str]]:
+def _cases(schema: dict[str, Any], scenes: list[dict[str, Any]]) -> list[tuple[str, dict[str, Any], str]]:
     cases: dict[str, tuple[str, dict[str, Any], str]] = {}
-    for scene in _scenes():
-        for path, bound, limit, integer in _bounded_leaves(SCHEMA, scene, []):
+    for scene in scenes:
+        for path, bound, limit, integer in _bounded_leaves(schema, scene, []):
             data = copy.deepcopy(scene)
             key = _set(data, path, _outside(bound, limit, integer))
             cases.setdefault(f"{key} {bound}", (key, data, bound))
     return sorted(cases.values(), key=lambda c: (c[0], c[2]))
 
 
-CASES = _cases()
+CASES = _cases(SCHEMA, _scenes())
+CASES3 = _cases(SCHEMA3, _scenes3())
 
 
 def test_every_bound_is_exercised():
@@ -149,9 +180,25 @@ def test_python_and_the_engine_refuse_the_same_value_naming_the_same_key(key, da
     assert engine_error.value.key == key, str(engine_error.value)
 
 
+@pytest.mark.parametrize(("key", "data", "bound"), CASES3, ids=[f"3d-{c[0]}-{c[2]}" for c in CASES3])
+def test_3d_scenes_too(key, data, bound):
+    """The same for 3D scenes: just outside each bound of the 3D schema, Python and the engine name the key."""
+    assert {"walls[0].size[0]", "walls[3].length", "bodies[0].seeding.per_cell", "grid.resolution"} <= {
+        k for k, _, _ in CASES3
+    }
+    with pytest.raises(augmpm.SceneError) as python_error:
+        Scene3.from_dict(data)
+    assert python_error.value.key == key, str(python_error.value)
+    with pytest.raises(augmpm.SceneError) as engine_error:
+        _core.check_scene(augmpm.scene.json.dumps(data))
+    assert engine_error.value.key == key, str(engine_error.value)
+
+
 def test_valid_scenes_pass_both_checks():
     for data in _scenes():
         _core.check_scene(Scene.from_dict(data).to_json())
+    for data in _scenes3():
+        _core.check_scene(Scene3.from_dict(data).to_json())
 
 
 def test_defaults_come_from_the_engine():

@@ -578,7 +578,8 @@ fn seed_body(
     let lo = P3::from_fn(|k, _| reach(-P3::ith(k, 1.0))[k]);
     let hi = P3::from_fn(|k, _| reach(P3::ith(k, 1.0))[k]);
     let cells_f = ((hi - lo) / spacing).map(|c| c.ceil() + 1.0);
-    if cells_f.product() > MAX_SEED_CANDIDATES as Real {
+    // A NaN (a body too large for floating point) is refused too.
+    if cells_f.product().is_nan() || cells_f.product() > MAX_SEED_CANDIDATES as Real {
         return Err(SceneError::new(
             format!("{key}.seeding"),
             format!(
