@@ -167,31 +167,26 @@ def test_every_bound_is_exercised():
     assert len(CASES) > 30
 
 
-@pytest.mark.parametrize(("key", "data", "bound"), CASES, ids=[f"{c[0]}-{c[2]}" for c in CASES])
+@pytest.mark.parametrize(
+    ("key", "data", "bound"),
+    CASES + CASES3,
+    ids=[f"{c[0]}-{c[2]}" for c in CASES] + [f"3d-{c[0]}-{c[2]}" for c in CASES3],
+)
 def test_python_and_the_engine_refuse_the_same_value_naming_the_same_key(key, data, bound):
-    """Just outside each declared bound, the Python models and the engine (which runs any scene, also one
-    built without Python) both refuse the value and name the same dotted key: the two checks read one
-    declaration."""
+    """Just outside each declared bound (of 2D and 3D scenes), the Python models and the engine (which runs
+    any scene, also one built without Python) both refuse the value and name the same dotted key: the two
+    checks read one declaration."""
     with pytest.raises(augmpm.SceneError) as python_error:
-        Scene.from_dict(data)
+        augmpm.scene.scene_class(data).from_dict(data)
     assert python_error.value.key == key, str(python_error.value)
     with pytest.raises(augmpm.SceneError) as engine_error:
         _core.check_scene(augmpm.scene.json.dumps(data))
     assert engine_error.value.key == key, str(engine_error.value)
 
 
-@pytest.mark.parametrize(("key", "data", "bound"), CASES3, ids=[f"3d-{c[0]}-{c[2]}" for c in CASES3])
-def test_3d_scenes_too(key, data, bound):
-    """The same for 3D scenes: just outside each bound of the 3D schema, Python and the engine name the key."""
-    assert {"walls[0].size[0]", "walls[3].length", "bodies[0].seeding.per_cell", "grid.resolution"} <= {
-        k for k, _, _ in CASES3
-    }
-    with pytest.raises(augmpm.SceneError) as python_error:
-        Scene3.from_dict(data)
-    assert python_error.value.key == key, str(python_error.value)
-    with pytest.raises(augmpm.SceneError) as engine_error:
-        _core.check_scene(augmpm.scene.json.dumps(data))
-    assert engine_error.value.key == key, str(engine_error.value)
+def test_the_3d_cases_reach_every_3d_table():
+    keys = {k for k, _, _ in CASES3}
+    assert {"walls[0].size[0]", "walls[3].length", "bodies[0].seeding.per_cell", "grid.resolution"} <= keys
 
 
 def test_valid_scenes_pass_both_checks():
