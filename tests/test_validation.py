@@ -96,6 +96,16 @@ def test_incline_acceleration_is_g_sin_theta(quick_report):
         assert _value(records, "incline", "augmented", "particles_outside_max", angle) == 0
 
 
+def test_3d_ball_on_a_compound_plane_accelerates_at_g_sin_theta(quick_report):
+    """In 3D, a ball on a frictionless plane whose normal lies in no coordinate plane accelerates at g·sinθ
+    within 1% (0.06–0.22% at 24 cells when measured) and stays out of the plane."""
+    _, out, records = quick_report
+    for angle in (15.0, 30.0, 45.0):
+        assert _value(records, "incline3d", "augmented", "acceleration_rel_error", angle) < 0.01
+        assert _value(records, "incline3d", "augmented", "particles_outside_max", angle) == 0
+    assert (out / "incline3d.png").stat().st_size > 1000
+
+
 def test_interpolation_of_linear_field_is_exact_only_with_augmented(quick_report):
     """Next to an inclined wall the augmented grid reproduces a linear distance field to round-off;
     the naive grid (wall-side nodes holding 0) is off by a tenth of a cell or more."""

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from augmpm.files import save_png, write_text
-from augmpm.validation import channel, dam_break, hydrostatic, incline, interpolation, moving, rotation
+from augmpm.validation import channel, dam_break, hydrostatic, incline, incline3d, interpolation, moving, rotation
 from augmpm.validation.records import Record
 
 ANGLES = [0.0, 15.0, 30.0, 45.0]
@@ -117,6 +117,21 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
         ax.set(xlabel="t (s)", ylabel="distance slid (m)", title="Block on a full-slip incline (lines: g sinθ)")
 
     plots.append(("Block on a frictionless incline", _plot_simple(out, "incline.png", draw_inc)))
+
+    inc3 = stage("3D: ball on a frictionless plane at a compound angle", lambda: incline3d.run(quick, angles))
+
+    def draw_inc3(ax):
+        for (method, angle), (t, s, a) in inc3.items():
+            t = np.asarray(t)
+            ax.plot(t, np.asarray(s) - s[0], "o" if method == "augmented" else "x", ms=3, color=COLOURS[method],
+                    label=f"{method} {angle:g}°")  # fmt: skip
+            v0 = (s[1] - s[0]) / (t[1] - t[0]) - 0.5 * a * (t[1] - t[0])
+            ax.plot(t, v0 * (t - t[0]) + 0.5 * a * (t - t[0]) ** 2, "k-", lw=0.6)
+        ax.set(xlabel="t (s)", ylabel="distance slid (m)", title="3D: ball on a full-slip plane (lines: g sinθ)")
+
+    plots.append(
+        ("3D: ball on a frictionless plane at a compound angle", _plot_simple(out, "incline3d.png", draw_inc3))
+    )
 
     rough = stage("block on a rough incline (Coulomb friction)", lambda: incline.run_friction(quick))
 
