@@ -148,3 +148,39 @@ def test_a_3d_scene_beyond_the_memory_limit_is_refused(monkeypatch):
     with pytest.raises(augmpm.SceneError) as e:
         augmpm.Simulation(augmpm.Scene3.from_dict(_tank(grid={"domain": [1.0, 1.0, 1.0], "resolution": 64})))
     assert e.value.key in ("grid.resolution", "bodies[0].seeding")
+
+
+def test_walls_far_from_the_domain_or_sampled_too_finely_are_refused():
+    """A 3D wall more than a domain size from the box, or walls that would take more than 5e7 boundary
+    points, are refused naming the key, before anything is sampled."""
+    far = {"type": "sphere", "center": [0.5, 0.5, 0.5], "radius": 1e3}
+    with pytest.raises(augmpm.SceneError) as e:
+        augmpm.Simulation(augmpm.Scene3.from_dict(_tank(walls=[far])))
+    assert e.value.key == "walls[0]"
+    # 200 cells, points 0.06 h apart: about 1.3e8 points on the box and the tank.
+    fine = augmpm.Scene3.from_dict(
+        _tank(grid={"domain": [1.0, 1.0, 1.0], "resolution": 200}, augmented={"spacing": 0.06})
+    )
+    with pytest.raises(augmpm.SceneError) as e:
+        augmpm.Simulation(fine)
+    assert e.value.key == "augmented.spacing"
+
+
+def test_a_refused_restore_changes_nothing():
+    """A checkpoint whose wall rows do not fit the scene is refused naming them, and the simulation goes on
+    exactly as if the restore had not been tried."""
+    scene = augmpm.Scene3.from_dict(_tank())
+    sim, twin = augmpm.Simulation(scene), augmpm.Simulation(scene)
+    sim.step(30)
+    twin.step(30)
+    state = sim.checkpoint()
+    state["wall_impulse"] = np.zeros((5, 3))
+    with pytest.raises(augmpm.SceneError, match="wall_impulse"):
+        sim.restore(state)
+    posed = sim.checkpoint()
+    posed["wall_pose"] = np.array([[0.0, sim.time, 0.0, 0.0, 0.0, 0.1, 0.0, 0.0]])
+    with pytest.raises(augmpm.SceneError, match="2D scenes only"):
+        sim.restore(posed)
+    sim.step(30)
+    twin.step(30)
+    assert np.array_equal(sim.positions, twin.positions)

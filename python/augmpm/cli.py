@@ -13,7 +13,7 @@ from pathlib import Path
 from augmpm import _core
 from augmpm.files import write_text
 from augmpm.run import CHECKPOINT_EVERY, resume_run, run_scene
-from augmpm.scene import SCHEMA, SHIPPED_SCENES, load_scene, shipped_scenes
+from augmpm.scene import SCHEMA, SCHEMA3, SHIPPED_SCENES, load_scene, shipped_scenes
 
 EXIT_OK, EXIT_FAILED_RUN, EXIT_BAD_INPUT = 0, 1, 2
 _THREADS_HELP = "threads to run on (default: $AUGMPM_THREADS, else every core); results do not depend on it"
@@ -88,6 +88,7 @@ def _parser() -> argparse.ArgumentParser:
     sub.add_parser("scenes", help="list the scenes shipped with augmpm (run one by its name)")
     sc = sub.add_parser("schema", help="print the JSON Schema of scene files (for editors), or the scene reference")
     sc.add_argument("--markdown", action="store_true", help="the scene reference as Markdown, as in the README")
+    sc.add_argument("--3d", dest="three_d", action="store_true", help="the JSON Schema of 3D scene files")
 
     i = sub.add_parser("interp-test", help="the paper's Fig. 4 interpolation test (naive vs augmented)")
     i.add_argument("--out", type=Path, default=Path("runs/interp-test"), help="output directory")
@@ -247,10 +248,12 @@ def _scenes() -> int:
     return 0
 
 
-def _schema(markdown: bool) -> int:
-    """Prints the JSON Schema of scene files (TOML editors such as Taplo validate against it) or the
-    scene reference generated from it."""
-    if markdown:
+def _schema(markdown: bool, three_d: bool = False) -> int:
+    """Prints the JSON Schema of scene files, 2D or (``three_d``) 3D (TOML editors such as Taplo validate
+    against it), or the scene reference generated from both."""
+    if three_d and not markdown:
+        print(json.dumps(SCHEMA3, indent=2, ensure_ascii=False))
+    elif markdown:
         from augmpm.reference import scene_reference
 
         print(scene_reference(), end="")
@@ -278,7 +281,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "scenes":
             return _scenes()
         if args.command == "schema":
-            return _schema(args.markdown)
+            return _schema(args.markdown, args.three_d)
     except _core.SceneError as e:
         print(f"augmpm: bad input: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT

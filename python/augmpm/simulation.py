@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -192,8 +193,8 @@ class Simulation:
         number, a pose more than one cell from where the wall is now, a velocity that moves it more than
         a cell in a step, or a simulation that cannot follow moving walls.
         """
-        if not isinstance(wall, (int, np.integer)) or isinstance(wall, bool) or wall < 0:
-            raise _plain_error("wall", f"must be a wall index (an integer ≥ 0), got {wall!r}")
+        if not isinstance(wall, (int, np.integer)) or isinstance(wall, bool) or not 0 <= wall < 2**32:
+            raise _plain_error("wall", f"must be a wall index (an integer from 0), got {wall!r}")
         self._sim.set_wall_pose(
             int(wall),
             _pair("position", position),
@@ -209,9 +210,10 @@ class Simulation:
 
     @property
     def wall_impulse(self) -> np.ndarray:
-        """The impulse (N·s per metre of depth) each scene wall has given the material since the start,
-        shape (walls + 1, 2), the domain box last. The force the material puts on a wall over an interval
-        is minus the change of its row divided by the interval (``metrics.csv``'s ``wall_force_<i>_x``)."""
+        """The impulse (N·s per metre of depth in 2D, N·s in 3D) each scene wall has given the material since
+        the start, shape (walls + 1, :attr:`dim`), the domain box last. The force the material puts on a wall
+        over an interval is minus the change of its row divided by the interval (``metrics.csv``'s
+        ``wall_force_<i>_x``)."""
         return self._sim.wall_impulse
 
     def metrics(self) -> dict[str, float]:
@@ -232,14 +234,20 @@ def _number(key: str, value: Any) -> float:
     """``value`` as a finite float, or a SceneError naming ``key``."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise _plain_error(key, f"must be a number, got {value!r}")
-    if not np.isfinite(value):
+    try:
+        number = float(value)
+    except OverflowError:
+        raise _plain_error(key, f"must be finite, got {value!r}") from None
+    if not math.isfinite(number):
         raise _plain_error(key, f"must be finite, got {value!r}")
-    return float(value)
+    return number
 
 
 def _pair(key: str, value: Any) -> tuple[float, float]:
     """``value`` as two finite floats, or a SceneError naming ``key``."""
-    if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)) or len(value) != 2:
+    if isinstance(value, np.ndarray):
+        value = value.tolist() if value.ndim == 1 else None
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) or len(value) != 2:
         raise _plain_error(key, f"must be two numbers [x, y], got {value!r}")
     return (_number(key, value[0]), _number(key, value[1]))
 

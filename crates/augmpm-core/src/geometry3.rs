@@ -342,7 +342,16 @@ impl Region<3> for Walls3 {
                 }
             };
             match (solid, side) {
-                (Solid::HalfSpace { .. }, _) | (_, Side::Inside) => solid.face_feet(x, &mut add),
+                (Solid::HalfSpace { .. }, _) => solid.face_feet(x, &mut add),
+                (_, Side::Inside) => {
+                    solid.face_feet(x, &mut add);
+                    // Escaped past an edge or a corner (beyond two or three faces' extents): the nearest
+                    // point of the container, on the edge or the corner, so that it goes no farther.
+                    let (d, n) = solid.signed_distance(x);
+                    if d > 0.0 {
+                        add(x - n * d, n, 0.0);
+                    }
+                }
                 (_, Side::Outside) => {
                     // An obstacle is convex: its nearest surface point, from outside or from within.
                     let (d, n) = solid.signed_distance(x);
@@ -475,7 +484,8 @@ mod tests {
     }
 
     /// A particle near a corner of a tilted box container has a foot on each of the three faces, each
-    /// with the face's outward normal; one just outside a box obstacle's edge has its foot on the edge.
+    /// with the face's outward normal, and one that escaped past the corner a foot on it; one just outside
+    /// a box obstacle's edge has its foot on the edge.
     #[test]
     fn feet_on_the_faces_in_reach() {
         let Solid::Box { centre, half, axes } = tilted_box() else { unreachable!() };
@@ -487,6 +497,10 @@ mod tests {
         for f in feet.iter() {
             assert!((f.x - corner).dot(&f.normal).abs() < 1e-12 && f.normal.dot(&(f.x - x)) > 0.0);
         }
+        // Escaped past the corner (beyond all three faces' extents): a foot on the corner itself.
+        let x = centre + axes * (half + P3::new(0.01, 0.01, 0.01));
+        let feet = walls.wall_feet(&x, 0.05);
+        assert!(feet.iter().any(|f| (f.x - corner).norm() < 1e-12), "a foot on the corner");
         let obstacle = Walls3::new(vec![Wall3 { solid: tilted_box(), side: Side::Outside }], P3::new(1.0, 1.0, 1.0));
         let edge = centre + axes * P3::new(half.x, half.y, 0.0);
         let x = edge + axes * P3::new(0.01, 0.01, 0.0);

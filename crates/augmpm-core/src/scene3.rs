@@ -25,6 +25,9 @@ use serde::{Deserialize, Serialize};
 
 type P3 = Vector<3>;
 
+/// The most points the walls of a 3D scene may be sampled with (about 200 bytes each).
+const MAX_BOUNDARY_POINTS: Real = 5e7;
+
 /// The background grid of a 3D scene.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -141,6 +144,29 @@ fn z_axis() -> [Real; 3] {
 }
 
 impl Wall3Spec {
+    /// The centre and the radius (m) of a ball around the wall's solid (none for a plane, sampled only
+    /// where it crosses the domain).
+    fn bounds(&self) -> Option<(P3, Real)> {
+        match self {
+            Wall3Spec::Box { center, size, .. } => Some((p3(center), p3(size).norm() * 0.5)),
+            Wall3Spec::Sphere { center, radius, .. } => Some((p3(center), *radius)),
+            Wall3Spec::Cylinder { center, radius, length, .. } => Some((p3(center), radius.hypot(0.5 * length))),
+            Wall3Spec::Plane { .. } => None,
+        }
+    }
+
+    /// Area (m²) of the wall's surface (a plane: at most the largest cross-section of the domain box,
+    /// bounded by the sum of its faces' areas over two).
+    fn area(&self, domain: &[Real; 3]) -> Real {
+        let pi = crate::math::PI;
+        match self {
+            Wall3Spec::Box { size, .. } => 2.0 * (size[0] * size[1] + size[1] * size[2] + size[2] * size[0]),
+            Wall3Spec::Sphere { radius, .. } => 4.0 * pi * radius * radius,
+            Wall3Spec::Cylinder { radius, length, .. } => 2.0 * pi * radius * (length + radius),
+            Wall3Spec::Plane { .. } => domain[0] * domain[1] + domain[1] * domain[2] + domain[2] * domain[0],
+        }
+    }
+
     /// The wall's own condition and friction coefficient, if it names them.
     fn contact_keys(&self) -> (Option<WallCondition>, Option<Real>) {
         match self {
@@ -397,8 +423,19 @@ impl Scene3 {
         let side = |s: &SideSpec| if *s == SideSpec::Inside { Side::Inside } else { Side::Outside };
         let mut walls = Vec::new();
         let mut contacts = Vec::new();
+        let extent = P3::from_fn(|k, _| self.grid.domain[k]);
         for (i, w) in self.walls.iter().enumerate() {
             let key = format!("walls[{i}]");
+            // Walls are sampled (augmented grid) and classified against the grid: keep them within one
+            // domain size of the box, as in 2D.
+            if let Some((centre, reach)) = w.bounds() {
+                if (0..3).any(|k| centre[k] - reach < -extent[k] || centre[k] + reach > 2.0 * extent[k]) {
+                    return Err(SceneError::new(
+                        &key,
+                        "wall lies far outside the domain box (more than one domain size away)",
+                    ));
+                }
+            }
             let wall = match w {
                 Wall3Spec::Box { center, size, axis, angle, side: s, .. } => {
                     let axis = nalgebra::Unit::new_normalize(direction(&format!("{key}.axis"), axis)?);
@@ -425,7 +462,6 @@ impl Scene3 {
             contacts.push(self.contact(condition.unwrap_or(self.wall_condition), friction));
         }
         contacts.push(self.contact(self.wall_condition, None));
-        let extent = P3::from_fn(|k, _| self.grid.domain[k]);
         Ok((Walls3::new(walls, extent), contacts))
     }
 
@@ -439,6 +475,8 @@ impl Scene3 {
     /// the bodies' volumes and seeding, the grid from its nodes.
     pub fn memory_estimate(&self) -> Result<MemoryEstimate, SceneError> {
         self.validate()?;
+        // A wall far outside the domain is refused as such, not for the points it would take.
+        self.walls()?;
         let layout = self.layout()?;
         let nodes = layout.num_nodes() as u64;
         let h = layout.h;
@@ -464,12 +502,27 @@ impl Scene3 {
             + 4 * std::mem::size_of::<Real>()) as Real;
         let (particle_bytes, grid_bytes) =
             (particles * per_particle, nodes as Real * 9.0 * std::mem::size_of::<Real>() as Real);
+        // The boundary points: each with its normals, velocity, grid values and index entry.
+        let point_bytes =
+            self.boundary_points() * (std::mem::size_of::<crate::wall::BoundaryPoint<3>>() + 6 * 8) as Real;
         let key = match largest.1 {
-            Some(b) if particle_bytes > grid_bytes => format!("bodies[{b}].seeding"),
+            Some(b) if particle_bytes > grid_bytes.max(point_bytes) => format!("bodies[{b}].seeding"),
+            _ if point_bytes > grid_bytes => "augmented.spacing".to_string(),
             _ => "grid.resolution".to_string(),
         };
+        let grid_bytes = grid_bytes + point_bytes;
         let saturate = |v: Real| if v >= u64::MAX as Real { u64::MAX } else { v as u64 };
         Ok(MemoryEstimate { bytes: saturate(particle_bytes + grid_bytes), particles: saturate(particles), nodes, key })
+    }
+
+    /// About how many points sample the walls' surfaces (the domain box's included) at the augmented
+    /// grid's spacing: area over spacing², plus a row along every edge.
+    fn boundary_points(&self) -> Real {
+        let spacing = self.augmented.spacing * self.cell_size();
+        let d = &self.grid.domain;
+        let box_area = 2.0 * (d[0] * d[1] + d[1] * d[2] + d[2] * d[0]);
+        let area: Real = box_area + self.walls.iter().map(|w| w.area(d)).sum::<Real>();
+        area / (spacing * spacing) * 1.5
     }
 
     /// Validates the scene and builds the simulation; returns warnings beside it.
@@ -487,6 +540,13 @@ impl Scene3 {
         let layout = self.layout()?;
         let h = layout.h;
         let (region, contacts) = self.walls()?;
+        let points = self.boundary_points();
+        if points.is_nan() || points > MAX_BOUNDARY_POINTS {
+            return Err(SceneError::new(
+                "augmented.spacing",
+                format!("the walls would be sampled with about {points:.3e} points (at most {MAX_BOUNDARY_POINTS:e}); raise the spacing or lower grid.resolution"),
+            ));
+        }
         let boundary = match method {
             Method::Naive => Boundary::Naive(NaiveBoundary::new(&layout, &region, contacts)),
             Method::Augmented => {

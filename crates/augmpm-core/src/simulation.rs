@@ -554,12 +554,7 @@ where
         if let Some(i) = p.body.iter().position(|&b| b as usize >= bodies) {
             return Err(format!("particle {i}: body {} of {bodies}", p.body[i]));
         }
-        let layout = &self.model.layout;
-        let run = |s: &mut Schedule<D>| s.restore(layout, &p.x, &state.binning);
-        match &self.pool {
-            Some(pool) => pool.install(|| run(&mut self.scratch.schedule)),
-            None => run(&mut self.scratch.schedule),
-        }?;
+        // Every check before anything changes (the schedule's restore is the first change).
         let walls = self.model.boundary.contacts().len();
         if !state.wall_impulse.is_empty() && state.wall_impulse.len() != walls {
             return Err(format!(
@@ -570,6 +565,15 @@ where
         if let Some((w, _)) = state.wall_poses.iter().find(|(w, _)| *w + 1 >= walls) {
             return Err(format!("wall_pose names wall {w}; the scene has {} walls", walls - 1));
         }
+        for (w, pose) in &state.wall_poses {
+            self.pose_refused(*w, pose).map_err(|(key, reason)| format!("wall_pose of wall {w}: {key}: {reason}"))?;
+        }
+        let layout = &self.model.layout;
+        let run = |s: &mut Schedule<D>| s.restore(layout, &p.x, &state.binning);
+        match &self.pool {
+            Some(pool) => pool.install(|| run(&mut self.scratch.schedule)),
+            None => run(&mut self.scratch.schedule),
+        }?;
         let mut state = state;
         if state.wall_impulse.is_empty() {
             // A checkpoint written before walls' impulses were kept: none counted so far.
@@ -677,6 +681,34 @@ where
     /// number, a wall point that would jump or move more than one cell in a step, or a simulation that
     /// cannot follow moving walls (the paper's transfer, the corrected grid density).
     pub fn set_wall_pose(&mut self, wall: usize, pose: WallPose) -> Result<(), (&'static str, String)> {
+        let pose = WallPose { time: self.state.time, ..pose };
+        self.pose_refused(wall, &pose)?;
+        let h = self.model.layout.h;
+        let (jump, _) = self.model.region.pose_change(wall, &pose);
+        if jump > h {
+            return Err((
+                "position",
+                format!(
+                    "moves wall {wall} by up to {:.3} cells at once (at most one); move it over several steps",
+                    jump / h
+                ),
+            ));
+        }
+        let poses = &mut self.state.wall_poses;
+        match poses.binary_search_by_key(&wall, |&(w, _)| w) {
+            Ok(k) => poses[k].1 = pose,
+            Err(k) => poses.insert(k, (wall, pose)),
+        }
+        self.model.follow_walls(self.state.time, &self.state.wall_poses);
+        self.scratch.grid.resize(self.model.boundary.num_points(&self.model.layout));
+        Ok(())
+    }
+
+    /// Why wall `wall` cannot take `pose` in this simulation, if it cannot (the argument and the reason):
+    /// a 3D scene, a wall that does not exist, a non-finite number, a transfer or density estimate that
+    /// assumes still walls, or a velocity of more than a cell per step. [`Simulation::set_wall_pose`] and
+    /// [`Simulation::restore`] ask it.
+    fn pose_refused(&self, wall: usize, pose: &WallPose) -> Result<(), (&'static str, String)> {
         if D != 2 {
             return Err(("wall", "walls are posed in 2D scenes only (3D walls do not move yet)".into()));
         }
@@ -684,7 +716,6 @@ where
         if wall >= walls {
             return Err(("wall", format!("there is no wall {wall}; the scene has {walls} walls")));
         }
-        let pose = WallPose { time: self.state.time, ..pose };
         if let Some(k) = pose.to_row().iter().position(|a| !a.is_finite()) {
             return Err((
                 ["time", "position", "position", "angle", "velocity", "velocity", "angular_velocity"][k],
@@ -700,16 +731,7 @@ where
             return Err(("wall", "grid.density_wall_correction is computed once, for still walls".into()));
         }
         let (h, dt) = (self.model.layout.h, self.model.dt);
-        let (jump, speed) = self.model.region.pose_change(wall, &pose);
-        if jump > h {
-            return Err((
-                "position",
-                format!(
-                    "moves wall {wall} by up to {:.3} cells at once (at most one); move it over several steps",
-                    jump / h
-                ),
-            ));
-        }
+        let (_, speed) = self.model.region.pose_change(wall, pose);
         if speed * dt > h {
             return Err((
                 "velocity",
@@ -719,18 +741,11 @@ where
                 ),
             ));
         }
-        let poses = &mut self.state.wall_poses;
-        match poses.binary_search_by_key(&wall, |&(w, _)| w) {
-            Ok(k) => poses[k].1 = pose,
-            Err(k) => poses.insert(k, (wall, pose)),
-        }
-        self.model.follow_walls(self.state.time, &self.state.wall_poses);
-        self.scratch.grid.resize(self.model.boundary.num_points(&self.model.layout));
         Ok(())
     }
 
-    /// The impulse each wall has given the material since the start (N·s, per metre in 2D), the
-    /// domain box last: minus what the material gave the wall.
+    /// The impulse each wall has given the material since the start (N·s, per metre in 2D, N·s in 3D),
+    /// the domain box last: minus what the material gave the wall.
     pub fn wall_impulse(&self) -> &[Vector<D>] {
         &self.state.wall_impulse
     }

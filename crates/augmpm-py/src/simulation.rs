@@ -400,8 +400,8 @@ impl PySimulation {
         })
     }
 
-    /// The impulse (N·s per metre of depth) each scene wall has given the material since the start,
-    /// shape (walls + 1, 2), the domain box last; the force a wall receives is minus its rate.
+    /// The impulse (N·s per metre of depth in 2D, N·s in 3D) each scene wall has given the material since
+    /// the start, shape (walls + 1, D), the domain box last; the force a wall receives is minus its rate.
     #[getter]
     fn wall_impulse<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         guard(|| with_sim!(&self.engine, s, core => vectors_to_array(py, s.wall_impulse())))

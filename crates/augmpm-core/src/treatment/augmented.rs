@@ -338,8 +338,8 @@ impl<const D: usize> AugmentedGrid<D> {
     pub fn follow(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>) {
         let n = layout.num_nodes();
         let half_diagonal = 0.5 * layout.h * (D as Real).sqrt();
-        // Re-classify a little early: the signed distances round.
-        let slack = 1e-9 * layout.h;
+        // Re-classify a little early: the signed distances round (in f32 by ~1e-7 of the domain's size).
+        let slack = (1e-9 * layout.h).max(16.0 * Real::EPSILON * layout.extent().max());
         let sweep = region.sweep();
         let Some(mut follow) = self.follow.take().filter(|_| sweep.is_finite()) else {
             // The first follow: every node, and what the next ones need.

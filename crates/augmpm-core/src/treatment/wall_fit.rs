@@ -219,7 +219,8 @@ pub fn fit_to_walls<const D: usize>(
 /// past each) back to [`PULL_MARGIN`] cells (of `h`, m) inside all of them over a step of `dt` (s), or
 /// [`PULL_MAX`] cells closer where it lies deeper:
 /// `P = Σ a_k n_k` with `n_j · P = −(min(depth_j, PULL_MAX h) + PULL_MARGIN h) / dt` for every such face (faces whose
-/// normals depend on the others add nothing). Zero for a particle past no face. Its part along each
+/// normals depend on the others add nothing), shortened to PULL_MAX cells a step where faces at a sharp
+/// angle would ask for more. Zero for a particle past no face. Its part along each
 /// face goes into the wall conditions' targets there, so that rounding cannot leave a particle past a
 /// wall for good (a particle on a face stays on it, in or out by rounding).
 fn pull_back<const D: usize>(feet: &WallFeet<D>, h: Real, dt: Real) -> Vector<D> {
@@ -241,7 +242,15 @@ fn pull_back<const D: usize>(feet: &WallFeet<D>, h: Real, dt: Real) -> Vector<D>
         k[j][m] = k[j][MAX_FEET];
     }
     let a = solve(&mut k, m);
-    (0..m).fold(Vector::<D>::zeros(), |p, j| p + normals[j] * a[j] as Real)
+    let pull = (0..m).fold(Vector::<D>::zeros(), |p, j| p + normals[j] * a[j] as Real);
+    // Faces at a sharp angle would ask for a long move: never more than PULL_MAX (and the margin) a step.
+    let most = (PULL_MAX + PULL_MARGIN) * h / dt;
+    let norm = pull.norm();
+    if norm > most {
+        pull * (most / norm)
+    } else {
+        pull
+    }
 }
 
 /// Solves the `m` × `m` system in the first `m` columns of `k` with right-hand side in column `m`
