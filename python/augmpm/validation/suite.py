@@ -105,30 +105,26 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
 
     plots.append(("Convergence of the channel flows", _plot_simple(out, "channel_convergence.png", draw_conv)))
 
+    def draw_slides(curves: dict, title: str) -> Callable:
+        """A plot of distance slid against time per method and angle, with the g·sinθ parabola."""
+
+        def draw(ax):
+            for (method, angle), (t, s, a) in curves.items():
+                t = np.asarray(t)
+                ax.plot(t, np.asarray(s) - s[0], "o" if method == "augmented" else "x", ms=3,
+                        color=COLOURS[method], label=f"{method} {angle:g}°")  # fmt: skip
+                v0 = (s[1] - s[0]) / (t[1] - t[0]) - 0.5 * a * (t[1] - t[0])
+                ax.plot(t, v0 * (t - t[0]) + 0.5 * a * (t - t[0]) ** 2, "k-", lw=0.6)
+            ax.set(xlabel="t (s)", ylabel="distance slid (m)", title=title)
+
+        return draw
+
     inc = stage("block on a frictionless incline", lambda: incline.run(quick, angles))
-
-    def draw_inc(ax):
-        for (method, angle), (t, s, a) in inc.items():
-            t = np.asarray(t)
-            ax.plot(t, np.asarray(s) - s[0], "o" if method == "augmented" else "x", ms=3, color=COLOURS[method],
-                    label=f"{method} {angle:g}°")  # fmt: skip
-            v0 = (s[1] - s[0]) / (t[1] - t[0]) - 0.5 * a * (t[1] - t[0])
-            ax.plot(t, v0 * (t - t[0]) + 0.5 * a * (t - t[0]) ** 2, "k-", lw=0.6)
-        ax.set(xlabel="t (s)", ylabel="distance slid (m)", title="Block on a full-slip incline (lines: g sinθ)")
-
+    draw_inc = draw_slides(inc, "Block on a full-slip incline (lines: g sinθ)")
     plots.append(("Block on a frictionless incline", _plot_simple(out, "incline.png", draw_inc)))
 
     inc3 = stage("3D: ball on a frictionless plane at a compound angle", lambda: incline3d.run(quick, angles))
-
-    def draw_inc3(ax):
-        for (method, angle), (t, s, a) in inc3.items():
-            t = np.asarray(t)
-            ax.plot(t, np.asarray(s) - s[0], "o" if method == "augmented" else "x", ms=3, color=COLOURS[method],
-                    label=f"{method} {angle:g}°")  # fmt: skip
-            v0 = (s[1] - s[0]) / (t[1] - t[0]) - 0.5 * a * (t[1] - t[0])
-            ax.plot(t, v0 * (t - t[0]) + 0.5 * a * (t - t[0]) ** 2, "k-", lw=0.6)
-        ax.set(xlabel="t (s)", ylabel="distance slid (m)", title="3D: ball on a full-slip plane (lines: g sinθ)")
-
+    draw_inc3 = draw_slides(inc3, "3D: ball on a full-slip plane (lines: g sinθ)")
     plots.append(
         ("3D: ball on a frictionless plane at a compound angle", _plot_simple(out, "incline3d.png", draw_inc3))
     )
