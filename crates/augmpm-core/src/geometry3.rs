@@ -4,11 +4,14 @@
 //!
 //! Boundary points are sampled on the surfaces at most `spacing` apart, uniformly whatever the surface's
 //! orientation: a square lattice on each plane and box face (its edges and corners sampled once, with
-//! two and three normals), latitude rings on spheres, rings along cylinders and on their caps.
+//! two and three normals), latitude rings on spheres, rings along cylinders and on their caps, and
+//! Poisson-disk samples on triangle meshes ([`crate::mesh`]).
 
 use crate::geometry::{Region, Side, WallDistance, WallFeet, WallFoot};
 use crate::math::{Matrix, Real, Vector};
+use crate::mesh::TriangleMesh;
 use crate::wall::BoundaryPoint;
+use std::sync::Arc;
 
 type P3 = Vector<3>;
 
@@ -37,6 +40,17 @@ pub enum Solid {
         radius: Real,
         half_length: Real,
     },
+    /// A closed triangle mesh, placed (held in f64 in either precision).
+    Mesh(Arc<TriangleMesh>),
+}
+
+/// A vector in the mesh's double precision, and back.
+fn wide(v: &P3) -> nalgebra::Vector3<f64> {
+    nalgebra::Vector3::new(f64::from(v.x), f64::from(v.y), f64::from(v.z))
+}
+
+fn narrow(v: &nalgebra::Vector3<f64>) -> P3 {
+    P3::new(v.x as Real, v.y as Real, v.z as Real)
 }
 
 /// A wall: a solid with the material inside it (a container; a half-space always) or outside it (an
@@ -97,6 +111,10 @@ impl Solid {
                 } else {
                     (d1, along)
                 }
+            }
+            Solid::Mesh(mesh) => {
+                let (d, n) = mesh.signed_distance(&wide(x));
+                (d as Real, narrow(&n))
             }
         }
     }
@@ -221,6 +239,11 @@ impl Solid {
                     }
                 }
             }
+            Solid::Mesh(mesh) => {
+                for (x, normals) in mesh.sample(f64::from(spacing)) {
+                    out.push((narrow(&x), normals.map(|n| narrow(&n))));
+                }
+            }
         }
         out
     }
@@ -266,6 +289,8 @@ impl Solid {
                     }
                 }
             }
+            // Its feet depend on the side the material is on: `Walls3::wall_feet`.
+            Solid::Mesh(_) => {}
         }
     }
 }
@@ -343,6 +368,10 @@ impl Region<3> for Walls3 {
             };
             match (solid, side) {
                 (Solid::HalfSpace { .. }, _) => solid.face_feet(x, &mut add),
+                (Solid::Mesh(mesh), side) => {
+                    let into = if side == Side::Inside { 1.0 } else { -1.0 };
+                    mesh.feet(&wide(x), f64::from(reach), into, |q, n| add(narrow(&q), narrow(&n), 0.0));
+                }
                 (_, Side::Inside) => {
                     solid.face_feet(x, &mut add);
                     // Escaped past an edge or a corner (beyond two or three faces' extents): the nearest

@@ -4,8 +4,8 @@
 //! (dimension-generic types) and [`parallel`] (thread thresholds, disjoint
 //! writes); [`kernel`] (B-spline weights, MLS shape functions), [`grid`],
 //! [`particles`] (the per-particle field table), [`material`] (constitutive
-//! models) and [`wall`] (wall conditions, boundary points); [`geometry`] (the
-//! walls' shapes); [`treatment`] (the wall treatments behind one trait: naive,
+//! models) and [`wall`] (wall conditions, boundary points); [`mesh`] (closed
+//! triangle meshes), [`geometry`] and [`geometry3`] (the walls' shapes); [`treatment`] (the wall treatments behind one trait: naive,
 //! augmented); [`step`] (the particles' schedule, the stages of a step);
 //! [`simulation`] (model, state, the step in order); [`schema`] and [`scene`]
 //! (scene parameters, declared once, and building a simulation from a scene).
@@ -19,6 +19,7 @@ pub mod grid;
 pub mod kernel;
 pub mod material;
 pub mod math;
+pub mod mesh;
 pub mod motion;
 pub mod parallel;
 pub mod particles;

@@ -255,7 +255,7 @@ pub enum BodyShape {
     },
 }
 
-fn one() -> Real {
+pub(crate) fn one() -> Real {
     1.0
 }
 

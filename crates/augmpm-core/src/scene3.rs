@@ -5,12 +5,13 @@
 
 use crate::geometry::{Region, Side};
 use crate::geometry3::{Solid, Wall3, Walls3};
+use crate::mesh::TriangleMesh;
 use crate::grid::GridLayout;
 use crate::material::{ConstitutiveModel, Material};
 use crate::math::{Matrix, Precision, Real, Vector};
 use crate::particles::Particles;
 use crate::scene::{
-    default_side, friction, inside, time_step, AugmentedSpec, MemoryEstimate, SceneError, Seeding, SideSpec, TimeSpec,
+    default_side, friction, inside, one, time_step, AugmentedSpec, MemoryEstimate, SceneError, Seeding, SideSpec, TimeSpec,
     MAX_GRID_NODES, MAX_SEED_CANDIDATES,
 };
 use crate::simulation::{Model, Simulation};
@@ -137,6 +138,115 @@ pub enum Wall3Spec {
         #[schemars(schema_with = "friction::optional_schema")]
         friction: Option<Real>,
     },
+    /// A closed triangle mesh, material `outside` it (an obstacle, the default) or `inside` it (a
+    /// container).
+    #[schemars(title = "MeshWall")]
+    Mesh {
+        #[serde(flatten)]
+        mesh: MeshSource,
+        /// Where the material is: `outside` the mesh (an obstacle) or `inside` (a container).
+        #[serde(default = "default_side")]
+        side: SideSpec,
+        /// This wall's condition (default: the scene's `wall_condition`).
+        #[serde(default)]
+        condition: Option<WallCondition>,
+        /// Coulomb friction coefficient μ of a `separate` wall (default: the scene's `wall_friction`).
+        #[serde(default, with = "friction::optional")]
+        #[schemars(schema_with = "friction::optional_schema")]
+        friction: Option<Real>,
+    },
+}
+
+/// A closed triangle mesh and its placement: scaled about its origin, turned by `angle` about `axis`,
+/// its origin moved to `position`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "MeshSource")]
+pub struct MeshSource {
+    /// A mesh file (OBJ, STL or PLY; a relative path from the scene file's folder), read by the Python
+    /// package into `vertices` and `triangles`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub file: Option<String>,
+    /// Vertices of the mesh in its own frame (or read from `file`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    #[schemars(extend("unit" = "m", "unbounded" = true))]
+    pub vertices: Vec<[f64; 3]>,
+    /// Triangles as three indices into `vertices`, counter-clockwise seen from outside; the mesh must
+    /// be closed.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    #[schemars(extend("unit" = "1", "unbounded" = true))]
+    pub triangles: Vec<[usize; 3]>,
+    /// Scale of the mesh's frame.
+    #[serde(default = "one")]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "1"))]
+    pub scale: Real,
+    /// Where the mesh's origin is placed.
+    #[serde(default)]
+    #[schemars(extend("unit" = "m", "unbounded" = true))]
+    pub position: [Real; 3],
+    /// Axis the mesh is turned about (any length but zero).
+    #[serde(default = "z_axis")]
+    #[schemars(extend("unit" = "1", "unbounded" = true))]
+    pub axis: [Real; 3],
+    /// Angle the mesh is turned by about `axis`, counter-clockwise seen from its tip.
+    #[serde(default)]
+    #[schemars(extend("unit" = "rad", "unbounded" = true))]
+    pub angle: Real,
+    /// Edges whose faces' normals differ by more than this are creases (their boundary points carry
+    /// both faces' normals); 0.5236 rad is 30°.
+    #[serde(default = "crease_angle")]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "maximum" = 3.1416, "unit" = "rad"))]
+    pub crease_angle: Real,
+}
+
+impl MeshSource {
+    /// The vertices placed in the scene (m).
+    fn placed(&self) -> Vec<[f64; 3]> {
+        let axis = nalgebra::Vector3::from_iterator(self.axis.iter().map(|&c| f64::from(c)));
+        let turn = if axis.norm() > 0.0 {
+            nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), f64::from(self.angle))
+        } else {
+            nalgebra::Rotation3::identity()
+        };
+        let position = nalgebra::Vector3::from_iterator(self.position.iter().map(|&c| f64::from(c)));
+        let scale = f64::from(self.scale);
+        self.vertices.iter().map(|v| (turn * (nalgebra::Vector3::from(*v) * scale) + position).into()).collect()
+    }
+
+    /// The checked mesh, placed; an error names `key`'s entry.
+    fn build(&self, key: &str) -> Result<std::sync::Arc<TriangleMesh>, SceneError> {
+        if self.vertices.is_empty() || self.triangles.is_empty() {
+            return Err(match &self.file {
+                Some(_) => SceneError::new(
+                    format!("{key}.file"),
+                    "mesh files are read by the Python package (augmpm); the engine takes vertices and triangles",
+                ),
+                None => SceneError::new(key, "give a mesh file, or vertices and triangles"),
+            });
+        }
+        TriangleMesh::new(&self.placed(), &self.triangles, f64::from(self.crease_angle))
+            .map(std::sync::Arc::new)
+            .map_err(|e| SceneError::new(format!("{key}.{}", e.key), e.reason))
+    }
+
+    /// The centre and the radius (m) of a ball around the placed mesh.
+    fn bounds(&self) -> (P3, Real) {
+        let placed = self.placed();
+        let lo = placed.iter().fold([f64::INFINITY; 3], |m, v| std::array::from_fn(|k| m[k].min(v[k])));
+        let hi = placed.iter().fold([f64::NEG_INFINITY; 3], |m, v| std::array::from_fn(|k| m[k].max(v[k])));
+        let (lo, hi) = (P3::from_fn(|k, _| lo[k] as Real), P3::from_fn(|k, _| hi[k] as Real));
+        ((lo + hi) * 0.5, (hi - lo).norm() * 0.5)
+    }
+
+    /// Surface area (m²) of the placed mesh.
+    fn area(&self) -> Real {
+        let v = |i: usize| nalgebra::Vector3::from(self.vertices.get(i).copied().unwrap_or_default());
+        let area: f64 = self.triangles.iter().map(|t| 0.5 * (v(t[1]) - v(t[0])).cross(&(v(t[2]) - v(t[0]))).norm()).sum();
+        area as Real * self.scale * self.scale
+    }
+}
+
+fn crease_angle() -> Real {
+    crate::math::PI / 6.0
 }
 
 fn z_axis() -> [Real; 3] {
@@ -151,7 +261,8 @@ impl Wall3Spec {
             Wall3Spec::Box { center, size, .. } => Some((p3(center), p3(size).norm() * 0.5)),
             Wall3Spec::Sphere { center, radius, .. } => Some((p3(center), *radius)),
             Wall3Spec::Cylinder { center, radius, length, .. } => Some((p3(center), radius.hypot(0.5 * length))),
-            Wall3Spec::Plane { .. } => None,
+            Wall3Spec::Mesh { mesh, .. } if !mesh.vertices.is_empty() => Some(mesh.bounds()),
+            Wall3Spec::Plane { .. } | Wall3Spec::Mesh { .. } => None,
         }
     }
 
@@ -164,6 +275,7 @@ impl Wall3Spec {
             Wall3Spec::Sphere { radius, .. } => 4.0 * pi * radius * radius,
             Wall3Spec::Cylinder { radius, length, .. } => 2.0 * pi * radius * (length + radius),
             Wall3Spec::Plane { .. } => domain[0] * domain[1] + domain[1] * domain[2] + domain[2] * domain[0],
+            Wall3Spec::Mesh { mesh, .. } => mesh.area(),
         }
     }
 
@@ -173,7 +285,8 @@ impl Wall3Spec {
             Wall3Spec::Box { condition, friction, .. }
             | Wall3Spec::Plane { condition, friction, .. }
             | Wall3Spec::Sphere { condition, friction, .. }
-            | Wall3Spec::Cylinder { condition, friction, .. } => (*condition, *friction),
+            | Wall3Spec::Cylinder { condition, friction, .. }
+            | Wall3Spec::Mesh { condition, friction, .. } => (*condition, *friction),
         }
     }
 }
@@ -217,6 +330,12 @@ pub enum Body3Shape {
         /// Length along the axis.
         #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "m"))]
         length: Real,
+    },
+    /// A closed triangle mesh.
+    #[schemars(title = "MeshBody")]
+    Mesh {
+        #[serde(flatten)]
+        mesh: MeshSource,
     },
 }
 
@@ -356,6 +475,9 @@ impl Scene3 {
                 Wall3Spec::Plane { normal, .. } => {
                     direction(&format!("{key}.normal"), normal)?;
                 }
+                Wall3Spec::Mesh { mesh, .. } => {
+                    direction(&format!("{key}.axis"), &mesh.axis)?;
+                }
                 Wall3Spec::Sphere { .. } => {}
             }
             let (condition, friction) = wall.contact_keys();
@@ -383,7 +505,7 @@ impl Scene3 {
                 Body3Shape::Box { min, max } if (0..3).any(|k| max[k] <= min[k]) => {
                     return Err(SceneError::new(format!("{key}.max"), "must exceed min along every axis"));
                 }
-                Body3Shape::Cylinder { axis, .. } => {
+                Body3Shape::Cylinder { axis, .. } | Body3Shape::Mesh { mesh: MeshSource { axis, .. } } => {
                     direction(&format!("{key}.axis"), axis)?;
                 }
                 _ => {}
@@ -456,6 +578,7 @@ impl Scene3 {
                         Solid::Cylinder { centre: p3(center), axis, radius: *radius, half_length: 0.5 * length };
                     Wall3 { solid, side: side(s) }
                 }
+                Wall3Spec::Mesh { mesh, side: s, .. } => Wall3 { solid: Solid::Mesh(mesh.build(&key)?), side: side(s) },
             };
             walls.push(wall);
             let (condition, friction) = w.contact_keys();
@@ -487,6 +610,7 @@ impl Scene3 {
                 Body3Shape::Box { min, max } => (p3(max) - p3(min)).product(),
                 Body3Shape::Sphere { radius, .. } => 4.0 / 3.0 * crate::math::PI * radius.powi(3),
                 Body3Shape::Cylinder { radius, length, .. } => crate::math::PI * radius * radius * length,
+                Body3Shape::Mesh { mesh } => mesh.build(&format!("bodies[{b}]"))?.volume() as Real,
             };
             let domain: Real = self.grid.domain.iter().product();
             let count = volume.min(domain) / seeding_spacing(body, h).powi(3);
@@ -625,6 +749,11 @@ fn seed_body(
             let solid = Solid::Cylinder { centre: p3(center), axis, radius: *radius, half_length: 0.5 * length };
             (solid, crate::math::PI * radius * radius * length)
         }
+        Body3Shape::Mesh { mesh } => {
+            let mesh = mesh.build(key)?;
+            let volume = mesh.volume() as Real;
+            (Solid::Mesh(mesh), volume)
+        }
     };
     // The bounding box of the solid: its distance along each axis from far away.
     let reach = |dir: P3| {
@@ -632,11 +761,17 @@ fn seed_body(
         let probe = match &solid {
             Solid::Box { centre, .. } | Solid::Sphere { centre, .. } | Solid::Cylinder { centre, .. } => *centre,
             Solid::HalfSpace { point, .. } => *point,
+            Solid::Mesh(_) => unreachable!("a mesh body takes its bounding box"),
         };
         probe + dir * (far - solid.signed_distance(&(probe + dir * far)).0)
     };
-    let lo = P3::from_fn(|k, _| reach(-P3::ith(k, 1.0))[k]);
-    let hi = P3::from_fn(|k, _| reach(P3::ith(k, 1.0))[k]);
+    let (lo, hi) = match &solid {
+        Solid::Mesh(mesh) => {
+            let (lo, hi) = mesh.bounds();
+            (P3::from_fn(|k, _| lo[k] as Real), P3::from_fn(|k, _| hi[k] as Real))
+        }
+        _ => (P3::from_fn(|k, _| reach(-P3::ith(k, 1.0))[k]), P3::from_fn(|k, _| reach(P3::ith(k, 1.0))[k])),
+    };
     let cells_f = ((hi - lo) / spacing).map(|c| c.ceil() + 1.0);
     // A NaN (a body too large for floating point) is refused too.
     if cells_f.product().is_nan() || cells_f.product() > MAX_SEED_CANDIDATES as Real {

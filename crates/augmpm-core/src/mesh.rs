@@ -1,0 +1,574 @@
+//! Closed triangle meshes as 3D walls and bodies: checked (closed, consistently oriented, facing out),
+//! with an exact signed distance, the feet of a particle on the faces in reach, and boundary points
+//! sampled uniformly on the surface.
+//!
+//! - Nearest points come from parry's bounding-volume hierarchy over the triangles; the sign of the
+//!   distance from the angle-weighted pseudo-normal of the nearest feature (face, edge or vertex), which
+//!   is exact for a closed mesh (Bærentzen & Aanæs 2005, "Signed distance computation using the angle
+//!   weighted pseudonormal").
+//! - Creases: an edge whose faces' normals differ by more than the crease angle is a crease; its points
+//!   carry both faces' normals, and a vertex where three or more distinct normals meet is a corner with
+//!   three (as a box's edges and corners, [`crate::wall::Normals`]). Elsewhere the surface is smooth and
+//!   a point carries its face's normal.
+//! - Boundary points: Poisson-disk elimination. Candidates are laid on every triangle at most `spacing/4`
+//!   apart (a barycentric lattice), and on the crease edges and corners; taken corners first, then crease
+//!   points, then faces, a candidate is kept unless a kept point lies within `3/4 spacing`. Every surface
+//!   point is then within `spacing` of a kept one, and kept points are at least `3/4 spacing` apart
+//!   however finely or coarsely the mesh is triangulated.
+//!
+//! The mesh is held in double precision in either precision of the engine.
+
+use parry3d_f64::bounding_volume::Aabb;
+use parry3d_f64::na::{Point3, Vector3};
+use parry3d_f64::query::PointQueryWithLocation;
+use parry3d_f64::shape::TriMesh;
+use std::collections::HashMap;
+
+type V = Vector3<f64>;
+
+/// A closed, consistently oriented triangle mesh whose triangles face out (counter-clockwise seen from
+/// outside), placed in the scene.
+pub struct TriangleMesh {
+    vertices: Vec<V>,
+    triangles: Vec<[u32; 3]>,
+    /// Unit outward normal of each triangle.
+    normals: Vec<V>,
+    /// Pseudo-normal of each triangle's edges `k` (from vertex `k` to `k + 1`): the sum of the two
+    /// faces' normals, normalised.
+    edge_normals: Vec<[V; 3]>,
+    /// Angle-weighted pseudo-normal of each vertex.
+    vertex_normals: Vec<V>,
+    /// The triangle on the other side of each triangle's edge `k`.
+    neighbours: Vec<[u32; 3]>,
+    /// cos of the crease angle: faces whose normals' dot product is below it meet at a crease.
+    crease_cos: f64,
+    /// The bounding-volume hierarchy of the triangles.
+    tree: TriMesh,
+    /// Enclosed volume (m³) and surface area (m²).
+    volume: f64,
+    area: f64,
+    /// Length (m) of the diagonal of the bounding box: the scale of rounding.
+    size: f64,
+}
+
+impl std::fmt::Debug for TriangleMesh {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "TriangleMesh {{ {} vertices, {} triangles }}", self.vertices.len(), self.triangles.len())
+    }
+}
+
+impl PartialEq for TriangleMesh {
+    fn eq(&self, other: &Self) -> bool {
+        self.vertices == other.vertices && self.triangles == other.triangles && self.crease_cos == other.crease_cos
+    }
+}
+
+/// Why a mesh was refused: the key it concerns (`vertices` or `triangles`) and the reason.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeshError {
+    pub key: &'static str,
+    pub reason: String,
+}
+
+fn refuse<T>(key: &'static str, reason: impl Into<String>) -> Result<T, MeshError> {
+    Err(MeshError { key, reason: reason.into() })
+}
+
+/// Where a point of a triangle lies, from its barycentric coordinates: on a vertex, an edge or the face.
+enum Feature {
+    Vertex(usize),
+    /// Local edge `k` (from vertex `k` to `k + 1`).
+    Edge(usize),
+    Face,
+}
+
+fn barycentric(p: &V, [a, b, c]: [&V; 3]) -> [f64; 3] {
+    let (e0, e1, r) = (b - a, c - a, p - a);
+    let (d00, d01, d11) = (e0.dot(&e0), e0.dot(&e1), e1.dot(&e1));
+    let (d20, d21) = (r.dot(&e0), r.dot(&e1));
+    let det = d00 * d11 - d01 * d01;
+    let v = (d11 * d20 - d01 * d21) / det;
+    let w = (d00 * d21 - d01 * d20) / det;
+    [1.0 - v - w, v, w]
+}
+
+impl TriangleMesh {
+    /// Checks and builds a mesh from its vertices (m) and triangles (indices into `vertices`,
+    /// counter-clockwise seen from outside). Vertices at the same position are one vertex (an STL file
+    /// repeats them). Refused: fewer than 4 triangles, a non-finite coordinate, an index out of range,
+    /// a triangle without area, an edge not shared by exactly two triangles that run it in opposite
+    /// directions (an open or inconsistently oriented mesh), a negative volume (triangles facing in).
+    /// Self-intersections are not looked for.
+    pub fn new(vertices: &[[f64; 3]], triangles: &[[usize; 3]], crease_angle: f64) -> Result<Self, MeshError> {
+        if triangles.len() < 4 {
+            return refuse("triangles", format!("a closed mesh needs at least 4 triangles, got {}", triangles.len()));
+        }
+        if let Some(i) = vertices.iter().position(|v| v.iter().any(|c| !c.is_finite())) {
+            return refuse("vertices", format!("vertices[{i}] is not finite"));
+        }
+        // One index per position: sort by coordinates, number the distinct ones.
+        let mut order: Vec<usize> = (0..vertices.len()).collect();
+        order.sort_by(|&a, &b| vertices[a].partial_cmp(&vertices[b]).expect("finite"));
+        let mut welded = vec![0u32; vertices.len()];
+        let mut points: Vec<V> = Vec::new();
+        for (k, &i) in order.iter().enumerate() {
+            if k == 0 || vertices[i] != vertices[order[k - 1]] {
+                points.push(V::from(vertices[i]));
+            }
+            welded[i] = (points.len() - 1) as u32;
+        }
+        let mut tris = Vec::with_capacity(triangles.len());
+        for (t, tri) in triangles.iter().enumerate() {
+            if let Some(&i) = tri.iter().find(|&&i| i >= vertices.len()) {
+                return refuse("triangles", format!("triangles[{t}] names vertex {i}; there are {}", vertices.len()));
+            }
+            tris.push(tri.map(|i| welded[i]));
+        }
+        let lo = points.iter().fold(V::repeat(f64::INFINITY), |m, p| m.inf(p));
+        let hi = points.iter().fold(V::repeat(f64::NEG_INFINITY), |m, p| m.sup(p));
+        let size = (hi - lo).norm();
+        let mut normals = Vec::with_capacity(tris.len());
+        for (t, tri) in tris.iter().enumerate() {
+            let [a, b, c] = tri.map(|i| points[i as usize]);
+            let n = (b - a).cross(&(c - a));
+            if n.norm() <= 1e-12 * size * size {
+                return refuse("triangles", format!("triangles[{t}] has no area (its corners are on one line)"));
+            }
+            normals.push(n.normalize());
+        }
+        // Each directed edge once, and its reverse once: closed and consistently oriented.
+        let mut edges: HashMap<(u32, u32), (u32, usize)> = HashMap::with_capacity(3 * tris.len());
+        for (t, tri) in tris.iter().enumerate() {
+            for k in 0..3 {
+                let e = (tri[k], tri[(k + 1) % 3]);
+                if let Some((other, _)) = edges.insert(e, (t as u32, k)) {
+                    return refuse(
+                        "triangles",
+                        format!(
+                            "triangles[{other}] and triangles[{t}] both run from vertex {} to {}: the mesh is not \
+                             consistently oriented, or more than two triangles meet at an edge",
+                            e.0, e.1
+                        ),
+                    );
+                }
+            }
+        }
+        let mut neighbours = vec![[0u32; 3]; tris.len()];
+        for (&(a, b), &(t, k)) in &edges {
+            match edges.get(&(b, a)) {
+                Some(&(other, _)) => neighbours[t as usize][k] = other,
+                None => {
+                    return refuse(
+                        "triangles",
+                        format!("the mesh is not closed: the edge from vertex {a} to {b} borders triangles[{t}] only"),
+                    )
+                }
+            }
+        }
+        let volume: f64 =
+            tris.iter().map(|t| points[t[0] as usize].dot(&points[t[1] as usize].cross(&points[t[2] as usize]))).sum::<f64>()
+                / 6.0;
+        if volume <= 0.0 {
+            return refuse(
+                "triangles",
+                format!(
+                    "the triangles face inward (the enclosed volume is {volume:e} m³): list each triangle's \
+                     vertices counter-clockwise seen from outside"
+                ),
+            );
+        }
+        let area = tris.iter().map(|t| 0.5 * (points[t[1] as usize] - points[t[0] as usize]).cross(&(points[t[2] as usize] - points[t[0] as usize])).norm()).sum();
+        let edge_normals = (0..tris.len())
+            .map(|t| std::array::from_fn(|k| (normals[t] + normals[neighbours[t][k] as usize]).normalize()))
+            .collect();
+        let mut vertex_normals = vec![V::zeros(); points.len()];
+        for (t, tri) in tris.iter().enumerate() {
+            for k in 0..3 {
+                let p = points[tri[k] as usize];
+                let (u, w) = (points[tri[(k + 1) % 3] as usize] - p, points[tri[(k + 2) % 3] as usize] - p);
+                vertex_normals[tri[k] as usize] += normals[t] * u.angle(&w);
+            }
+        }
+        for n in &mut vertex_normals {
+            *n = n.normalize();
+        }
+        let tree = TriMesh::new(points.iter().map(|p| Point3::from(*p)).collect(), tris.clone())
+            .map_err(|e| MeshError { key: "triangles", reason: e.to_string() })?;
+        Ok(Self {
+            vertices: points,
+            triangles: tris,
+            normals,
+            edge_normals,
+            vertex_normals,
+            neighbours,
+            crease_cos: crease_angle.cos(),
+            tree,
+            volume,
+            area,
+            size,
+        })
+    }
+
+    /// Enclosed volume (m³).
+    pub fn volume(&self) -> f64 {
+        self.volume
+    }
+
+    /// Surface area (m²).
+    pub fn area(&self) -> f64 {
+        self.area
+    }
+
+    /// The lowest and the highest corner (m) of the bounding box.
+    pub fn bounds(&self) -> (V, V) {
+        let aabb = self.tree.local_aabb();
+        (aabb.mins.coords, aabb.maxs.coords)
+    }
+
+    pub fn num_triangles(&self) -> usize {
+        self.triangles.len()
+    }
+
+    fn corners(&self, t: usize) -> [&V; 3] {
+        self.triangles[t].map(|i| &self.vertices[i as usize])
+    }
+
+    /// The feature of triangle `t` that its point `q` lies on, up to rounding.
+    fn feature(&self, t: usize, q: &V) -> Feature {
+        let b = barycentric(q, self.corners(t));
+        let eps = 1e-9;
+        let zeros: Vec<usize> = (0..3).filter(|&k| b[k] <= eps).collect();
+        match zeros.as_slice() {
+            [_, _] => Feature::Vertex((0..3).find(|k| !zeros.contains(k)).unwrap_or(0)),
+            // Zero opposite vertex k: the edge from k + 1 to k + 2.
+            [k] => Feature::Edge((k + 1) % 3),
+            _ => Feature::Face,
+        }
+    }
+
+    /// The nearest point of the surface to `x` and the triangle it lies on.
+    fn nearest(&self, x: &V) -> (V, usize) {
+        let (proj, (t, _)) = self.tree.project_local_point_and_get_location(&Point3::from(*x), false);
+        (proj.point.coords, t as usize)
+    }
+
+    /// Signed distance (m) to the surface, positive outside, and the outward unit normal: the distance's
+    /// gradient, or on the surface the pseudo-normal there.
+    pub fn signed_distance(&self, x: &V) -> (f64, V) {
+        let (q, t) = self.nearest(x);
+        let pseudo = match self.feature(t, &q) {
+            Feature::Vertex(k) => self.vertex_normals[self.triangles[t][k] as usize],
+            Feature::Edge(k) => self.edge_normals[t][k],
+            Feature::Face => self.normals[t],
+        };
+        let r = x - q;
+        let d = r.norm();
+        let sign = if r.dot(&pseudo) >= 0.0 { 1.0 } else { -1.0 };
+        if d > 1e-12 * self.size {
+            (sign * d, r * (sign / d))
+        } else {
+            (sign * d, pseudo)
+        }
+    }
+
+    /// The feet of `x` on the surface within `reach` (m): the nearest point, and the perpendiculars that
+    /// land inside a face facing `x`; of feet whose normals differ by less than the crease angle (one
+    /// smooth patch) only the nearest. `into` is +1 where the wall lies outside the mesh (a container),
+    /// −1 where it lies inside (an obstacle); `add` gets each foot and its normal into the wall.
+    pub fn feet(&self, x: &V, reach: f64, into: f64, mut add: impl FnMut(V, V)) {
+        const MOST: usize = 16;
+        let mut found = [(V::zeros(), V::zeros(), f64::INFINITY); MOST];
+        let mut len = 0;
+        let mut offer = |q: V, n: V, d: f64| {
+            if len < MOST {
+                found[len] = (q, n, d);
+                len += 1;
+            } else if let Some(far) = (0..MOST).max_by(|&a, &b| found[a].2.total_cmp(&found[b].2)) {
+                if found[far].2 > d {
+                    found[far] = (q, n, d);
+                }
+            }
+        };
+        let (d, n) = self.signed_distance(x);
+        if d.abs() < reach {
+            offer(x - n * d, n * into, d.abs());
+        }
+        let tolerance = f64::EPSILON.sqrt() * reach;
+        let aabb = Aabb::new(Point3::from(x - V::repeat(reach)), Point3::from(x + V::repeat(reach)));
+        for t in self.tree.bvh().intersect_aabb(&aabb) {
+            let t = t as usize;
+            let normal = self.normals[t];
+            let q = x - normal * normal.dot(&(x - self.vertices[self.triangles[t][0] as usize]));
+            let distance = (x - q).norm();
+            let inside = barycentric(&q, self.corners(t)).iter().all(|&b| b >= -1e-12);
+            // Facing: the face lies ahead of x along its normal into the wall.
+            if inside && distance < reach && (q - x).dot(&(normal * into)) >= -tolerance {
+                offer(q, normal * into, distance);
+            }
+        }
+        let found = &mut found[..len];
+        found.sort_by(|a, b| a.2.total_cmp(&b.2));
+        let mut kept: [V; MOST] = [V::zeros(); MOST];
+        let mut count = 0;
+        for &(q, n, _) in found.iter() {
+            if kept[..count].iter().all(|m| m.dot(&n) < self.crease_cos) {
+                kept[count] = n;
+                count += 1;
+                add(q, n);
+            }
+        }
+    }
+
+    /// Points on the surface at most `spacing` (m) apart with their outward normals (up to three, as
+    /// [`crate::wall::Normals`]: repeated where fewer faces meet), by Poisson-disk elimination (see the
+    /// module's documentation).
+    pub fn sample(&self, spacing: f64) -> Vec<(V, [V; 3])> {
+        let fine = spacing / 4.0;
+        let radius = spacing - fine;
+        let crease = |t: usize, k: usize| self.normals[t].dot(&self.normals[self.neighbours[t][k] as usize]) < self.crease_cos;
+        // Distinct normals of the faces around each vertex on a crease.
+        let mut around: Vec<Vec<V>> = vec![Vec::new(); self.vertices.len()];
+        for (t, tri) in self.triangles.iter().enumerate() {
+            for k in 0..3 {
+                let n = self.normals[t];
+                let list = &mut around[tri[k] as usize];
+                if list.iter().all(|m| m.dot(&n) < self.crease_cos) {
+                    list.push(n);
+                }
+            }
+        }
+        let mut on_crease = vec![false; self.vertices.len()];
+        for (t, tri) in self.triangles.iter().enumerate() {
+            for k in 0..3 {
+                if crease(t, k) {
+                    on_crease[tri[k] as usize] = true;
+                    on_crease[tri[(k + 1) % 3] as usize] = true;
+                }
+            }
+        }
+        let mut corners = Vec::new();
+        let mut creases = Vec::new();
+        for (v, list) in around.iter().enumerate() {
+            if !on_crease[v] || list.len() < 2 {
+                continue;
+            }
+            let x = self.vertices[v];
+            if list.len() == 2 {
+                creases.push((x, [list[0], list[1], list[1]]));
+            } else {
+                // The three that span the most: the first, the one farthest from it, the one farthest
+                // from both.
+                let a = list[0];
+                let b = *list.iter().min_by(|p, q| a.dot(p).total_cmp(&a.dot(q))).expect("three");
+                let c = *list.iter().max_by(|p, q| a.cross(&b).dot(p).abs().total_cmp(&a.cross(&b).dot(q).abs())).expect("three");
+                corners.push((x, [a, b, c]));
+            }
+        }
+        for (t, tri) in self.triangles.iter().enumerate() {
+            for k in 0..3 {
+                // Each crease edge once: from the triangle that runs it from the lower index.
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                if a < b && crease(t, k) {
+                    let (pa, pb) = (self.vertices[a as usize], self.vertices[b as usize]);
+                    let other = self.normals[self.neighbours[t][k] as usize];
+                    let parts = ((pb - pa).norm() / fine).ceil().max(1.0) as usize;
+                    for i in 1..parts {
+                        creases.push((pa + (pb - pa) * (i as f64 / parts as f64), [self.normals[t], other, other]));
+                    }
+                }
+            }
+        }
+        let mut faces = Vec::new();
+        for (t, normal) in self.normals.iter().enumerate() {
+            let [a, b, c] = self.corners(t);
+            let longest = [(b - a).norm(), (c - b).norm(), (a - c).norm()].into_iter().fold(0.0, f64::max);
+            let parts = (longest / fine).ceil().max(1.0) as usize;
+            for i in 0..=parts {
+                for j in 0..=parts - i {
+                    let x = a + (b - a) * (i as f64 / parts as f64) + (c - a) * (j as f64 / parts as f64);
+                    faces.push((x, [*normal; 3]));
+                }
+            }
+        }
+        // Elimination on a hash grid of cells `radius` wide.
+        let cell = |x: &V| (x / radius).map(|c| c.floor() as i64);
+        let mut grid: HashMap<(i64, i64, i64), Vec<usize>> = HashMap::new();
+        let mut kept: Vec<(V, [V; 3])> = Vec::new();
+        for (x, normals) in corners.into_iter().chain(creases).chain(faces) {
+            let c = cell(&x);
+            let near = (-1..=1).flat_map(|i| (-1..=1).flat_map(move |j| (-1..=1).map(move |k| (c.x + i, c.y + j, c.z + k))));
+            let taken = near.into_iter().any(|key| {
+                grid.get(&key).is_some_and(|list| list.iter().any(|&p| (kept[p].0 - x).norm() < radius))
+            });
+            if !taken {
+                grid.entry((c.x, c.y, c.z)).or_default().push(kept.len());
+                kept.push((x, normals));
+            }
+        }
+        kept
+    }
+}
+
+/// Builders of simple closed meshes, for tests and examples.
+pub mod shapes {
+    /// An axis-aligned box from `lo` to `hi` (m): 8 vertices, 12 triangles facing out.
+    pub fn cuboid(lo: [f64; 3], hi: [f64; 3]) -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
+        let v = (0..8).map(|c| std::array::from_fn(|k| if c >> k & 1 == 0 { lo[k] } else { hi[k] })).collect();
+        // Faces as quads (counter-clockwise from outside), split in two.
+        let quads = [[0, 4, 6, 2], [1, 3, 7, 5], [0, 1, 5, 4], [2, 6, 7, 3], [0, 2, 3, 1], [4, 5, 7, 6]];
+        let t = quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect();
+        (v, t)
+    }
+
+    /// A sphere of `radius` (m) about `centre`: an icosahedron subdivided `levels` times, its vertices
+    /// pushed onto the sphere.
+    pub fn icosphere(centre: [f64; 3], radius: f64, levels: usize) -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
+        let g = (1.0 + 5f64.sqrt()) / 2.0;
+        let mut v: Vec<[f64; 3]> = vec![
+            [-1.0, g, 0.0], [1.0, g, 0.0], [-1.0, -g, 0.0], [1.0, -g, 0.0],
+            [0.0, -1.0, g], [0.0, 1.0, g], [0.0, -1.0, -g], [0.0, 1.0, -g],
+            [g, 0.0, -1.0], [g, 0.0, 1.0], [-g, 0.0, -1.0], [-g, 0.0, 1.0],
+        ];
+        let mut t: Vec<[usize; 3]> = vec![
+            [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2],
+            [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5],
+            [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+        ];
+        for _ in 0..levels {
+            let mut mid = std::collections::HashMap::new();
+            let mut middle = |a: usize, b: usize, v: &mut Vec<[f64; 3]>| {
+                *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                    v.push(std::array::from_fn(|k| 0.5 * (v[a][k] + v[b][k])));
+                    v.len() - 1
+                })
+            };
+            let mut next = Vec::with_capacity(4 * t.len());
+            for [a, b, c] in t {
+                let (ab, bc, ca) = (middle(a, b, &mut v), middle(b, c, &mut v), middle(c, a, &mut v));
+                next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+            }
+            t = next;
+        }
+        let v = v
+            .iter()
+            .map(|p| {
+                let n = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+                std::array::from_fn(|k| centre[k] + radius * p[k] / n)
+            })
+            .collect();
+        (v, t)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::shapes::{cuboid, icosphere};
+    use super::*;
+
+    fn uniform(n: usize) -> Vec<f64> {
+        let mut s = 0x9e3779b97f4a7c15u64;
+        (0..n)
+            .map(|_| {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                (s >> 11) as f64 / (1u64 << 53) as f64
+            })
+            .collect()
+    }
+
+    /// A turned box as a mesh: the distance to its surface equals that of the exact box (to 1e-12 m),
+    /// with the sign right inside, outside, near edges and corners.
+    #[test]
+    fn signed_distance_of_a_box_mesh_is_exact() {
+        let (v, t) = cuboid([0.2, 0.3, 0.25], [0.7, 0.6, 0.8]);
+        let mesh = TriangleMesh::new(&v, &t, 0.5).expect("a closed box");
+        assert!((mesh.volume() - 0.5 * 0.3 * 0.55).abs() < 1e-12);
+        let r = uniform(3 * 2000);
+        for k in 0..2000 {
+            let x = V::new(r[3 * k], r[3 * k + 1], r[3 * k + 2]);
+            let q = (x - V::new(0.45, 0.45, 0.525)).abs() - V::new(0.25, 0.15, 0.275);
+            let exact = q.map(|c| c.max(0.0)).norm() + q.max().min(0.0);
+            let (d, n) = mesh.signed_distance(&x);
+            assert!((d - exact).abs() < 1e-12, "{x}: {d} vs {exact}");
+            assert!((n.norm() - 1.0).abs() < 1e-12);
+        }
+    }
+
+    /// Refused, naming why: an open mesh, one with a triangle turned over, one facing inward, an index out
+    /// of range; an STL-like mesh (every triangle with its own copies of the vertices) is welded and taken.
+    #[test]
+    fn bad_meshes_are_refused() {
+        let (v, t) = cuboid([0.0; 3], [1.0; 3]);
+        let open = TriangleMesh::new(&v, &t[..11], 0.5).unwrap_err();
+        assert!(open.reason.contains("not closed"), "{open:?}");
+        let mut flipped = t.clone();
+        flipped[3].swap(1, 2);
+        assert!(TriangleMesh::new(&v, &flipped, 0.5).unwrap_err().reason.contains("consistently oriented"));
+        let inward: Vec<_> = t.iter().map(|&[a, b, c]| [a, c, b]).collect();
+        assert!(TriangleMesh::new(&v, &inward, 0.5).unwrap_err().reason.contains("face inward"));
+        let mut far = t.clone();
+        far[0][0] = 8;
+        assert_eq!(TriangleMesh::new(&v, &far, 0.5).unwrap_err().key, "triangles");
+        let soup: Vec<[f64; 3]> = t.iter().flat_map(|tri| tri.map(|i| v[i])).collect();
+        let soup_t: Vec<[usize; 3]> = (0..t.len()).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+        assert!((TriangleMesh::new(&soup, &soup_t, 0.5).expect("welded").volume() - 1.0).abs() < 1e-12);
+    }
+
+    /// Boundary points of a box mesh and a sphere mesh: on the surface, every surface point within
+    /// `spacing` of one, no two closer than 3/4 spacing; the box's 8 corners carry three normals and its
+    /// edges two, and its faces (split into two triangles each) one.
+    #[test]
+    fn samples_cover_the_surface_at_spacing() {
+        let spacing = 0.05;
+        for (v, t) in [cuboid([0.2, 0.3, 0.25], [0.7, 0.6, 0.8]), icosphere([0.5, 0.5, 0.5], 0.3, 3)] {
+            let mesh = TriangleMesh::new(&v, &t, 0.5).expect("closed");
+            let points = mesh.sample(spacing);
+            for (x, _) in &points {
+                assert!(mesh.signed_distance(x).0.abs() < 1e-12);
+            }
+            for (i, (x, _)) in points.iter().enumerate() {
+                let nearest = points.iter().enumerate().filter(|&(j, _)| j != i).map(|(_, p)| (p.0 - x).norm()).fold(f64::INFINITY, f64::min);
+                assert!(nearest >= 0.75 * spacing - 1e-12, "two points {nearest} apart");
+            }
+            let r = uniform(3 * 3000);
+            for k in 0..3000 {
+                let x = V::new(r[3 * k], r[3 * k + 1], r[3 * k + 2]);
+                let (d, n) = mesh.signed_distance(&x);
+                let on = x - n * d;
+                let nearest = points.iter().map(|p| (p.0 - on).norm()).fold(f64::INFINITY, f64::min);
+                assert!(nearest <= spacing, "{on} is {} spacings from a point", nearest / spacing);
+            }
+            if t.len() == 12 {
+                let count = |m: usize| {
+                    points.iter().filter(|(_, n)| (n[0] != n[1]) as usize + (n[1] != n[2]) as usize + 1 == m).count()
+                };
+                assert_eq!(count(3), 8);
+                assert!(count(2) >= 12 * 3, "edges sampled with two normals");
+                assert!(points.iter().all(|(x, n)| n.iter().all(|m| (m.norm() - 1.0).abs() < 1e-12) && x.z > 0.0));
+            } else {
+                assert!(points.iter().all(|(_, n)| n[0] == n[1] && n[1] == n[2]), "a sphere has no crease");
+            }
+        }
+    }
+
+    /// Feet: a particle near a corner inside a box mesh has one foot on each of the three faces (each
+    /// face split into two triangles counts once); near a finely triangulated sphere, one (the nearest).
+    #[test]
+    fn feet_on_faces_not_on_triangles() {
+        let (v, t) = cuboid([0.0; 3], [1.0; 3]);
+        let mesh = TriangleMesh::new(&v, &t, 0.5).expect("closed");
+        let mut feet = Vec::new();
+        mesh.feet(&V::new(0.97, 0.98, 0.96), 0.1, 1.0, |q, n| feet.push((q, n)));
+        assert_eq!(feet.len(), 3, "{feet:?}");
+        for (q, n) in &feet {
+            assert!((q - V::new(0.97, 0.98, 0.96)).dot(n) > 0.0 && (n.norm() - 1.0).abs() < 1e-12);
+        }
+        let (v, t) = icosphere([0.5; 3], 0.3, 4);
+        let sphere = TriangleMesh::new(&v, &t, 0.5).expect("closed");
+        let mut feet = Vec::new();
+        sphere.feet(&V::new(0.5, 0.5, 0.82), 0.1, -1.0, |q, n| feet.push((q, n)));
+        assert_eq!(feet.len(), 1);
+        assert!((feet[0].1 + V::z()).norm() < 0.1, "into the obstacle: {:?}", feet[0].1);
+    }
+}
