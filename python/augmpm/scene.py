@@ -10,6 +10,7 @@ inside the walls) is checked when the simulation is built.
 from __future__ import annotations
 
 import difflib
+import functools
 import json
 import math
 import tomllib
@@ -17,6 +18,8 @@ import typing
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+import meshio
+import numpy as np
 import pydantic
 import tomli_w
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PlainSerializer, ValidationError, model_validator
@@ -116,7 +119,8 @@ class _Scene(_Strict):
         return self.model_dump(mode="json", exclude_none=True)
 
     def to_json(self) -> str:
-        return json.dumps(self.to_dict())
+        """The scene as the engine takes it: every mesh ``file`` read into ``vertices`` and ``triangles``."""
+        return json.dumps(_with_meshes_read(self.to_dict()))
 
     def to_toml(self) -> str:
         return tomli_w.dumps(self.to_dict())
@@ -439,6 +443,64 @@ def scene_path(path: str | Path) -> Path:
     return shipped_scenes().get(name, path)
 
 
+#: Cells of a mesh file taken as its surface; quads and polygons are split into triangles (fans).
+_SURFACE_CELLS = ("triangle", "quad", "polygon")
+
+
+@functools.lru_cache(maxsize=32)
+def _read_mesh(path: str, stamp: tuple[int, int], key: str) -> tuple[list[list[float]], list[list[int]]]:
+    """The vertices and triangles of a mesh file (OBJ, STL, PLY, or any format meshio reads), for the
+    file as it was at ``stamp`` (modification time, size)."""
+    try:
+        mesh = meshio.read(path)
+    except Exception as e:  # meshio's readers raise their own errors, and OS and value errors
+        raise _plain_error(key, f"cannot read mesh file {path} ({e})") from None
+    triangles: list[np.ndarray] = []
+    for block in mesh.cells:
+        data = np.asarray(block.data, dtype=np.int64)
+        if block.type in _SURFACE_CELLS and data.ndim == 2 and data.shape[1] >= 3:
+            # Each cell's fan in turn: (0, 1, 2), (0, 2, 3), ...
+            fans = [data[:, [0, k, k + 1]] for k in range(1, data.shape[1] - 1)]
+            triangles.append(np.stack(fans, axis=1).reshape(-1, 3))
+    if not triangles:
+        kinds = sorted({block.type for block in mesh.cells}) or ["none"]
+        raise _plain_error(key, f"mesh file {path} has no triangles (its cells: {', '.join(kinds)})")
+    return np.asarray(mesh.points, dtype=np.float64)[:, :3].tolist(), np.concatenate(triangles).tolist()
+
+
+def _mesh_entries(data: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
+    """The walls and bodies of a scene dict that are meshes, with their keys (``walls[2]``)."""
+    entries: list[tuple[str, dict[str, Any]]] = []
+    for table, tag in (("walls", "type"), ("bodies", "shape")):
+        listed = data.get(table) if isinstance(data, dict) else None
+        for i, entry in enumerate(listed if isinstance(listed, list) else []):
+            if isinstance(entry, dict) and entry.get(tag) == "mesh":
+                entries.append((f"{table}[{i}]", entry))
+    return entries
+
+
+def _with_meshes_read(data: dict[str, Any]) -> dict[str, Any]:
+    """``data`` with the ``file`` of every mesh that gives no ``vertices`` read into them."""
+    for key, entry in _mesh_entries(data):
+        file = entry.get("file")
+        if file is None or entry.get("vertices"):
+            continue
+        try:
+            info = Path(file).stat()
+        except OSError as e:
+            raise _plain_error(f"{key}.file", f"cannot read mesh file {file} ({e.strerror})") from None
+        entry["vertices"], entry["triangles"] = _read_mesh(str(file), (info.st_mtime_ns, info.st_size), f"{key}.file")
+    return data
+
+
+def _resolve_mesh_files(data: dict[str, Any], folder: Path) -> None:
+    """Makes every relative mesh ``file`` of a scene read from ``folder`` absolute."""
+    for _, entry in _mesh_entries(data):
+        file = entry.get("file")
+        if isinstance(file, str) and not Path(file).is_absolute():
+            entry["file"] = str((folder / file).resolve())
+
+
 def load_scene(path: str | Path, overrides: list[str] | None = None) -> Scene:
     """Reads and validates a TOML scene file, or a shipped scene by name (see :func:`scene_path`);
     raises :class:`SceneError` on bad input."""
@@ -455,6 +517,8 @@ def load_scene(path: str | Path, overrides: list[str] | None = None) -> Scene:
         raise _plain_error(str(path), f"not valid TOML: {e}") from None
     for item in overrides or []:
         apply_override(data, item)
+    # A mesh file is named relative to the scene file's folder.
+    _resolve_mesh_files(data, path.parent)
     return scene_class(data).from_dict(data)
 
 

@@ -46,11 +46,11 @@ pub enum Solid {
 
 /// A vector in the mesh's double precision, and back.
 fn wide(v: &P3) -> nalgebra::Vector3<f64> {
-    nalgebra::Vector3::new(f64::from(v.x), f64::from(v.y), f64::from(v.z))
+    v.map(crate::math::wide)
 }
 
 fn narrow(v: &nalgebra::Vector3<f64>) -> P3 {
-    P3::new(v.x as Real, v.y as Real, v.z as Real)
+    v.map(|c| c as Real)
 }
 
 /// A wall: a solid with the material inside it (a container; a half-space always) or outside it (an
@@ -240,7 +240,7 @@ impl Solid {
                 }
             }
             Solid::Mesh(mesh) => {
-                for (x, normals) in mesh.sample(f64::from(spacing)) {
+                for (x, normals) in mesh.sample(crate::math::wide(spacing)) {
                     out.push((narrow(&x), normals.map(|n| narrow(&n))));
                 }
             }
@@ -370,7 +370,7 @@ impl Region<3> for Walls3 {
                 (Solid::HalfSpace { .. }, _) => solid.face_feet(x, &mut add),
                 (Solid::Mesh(mesh), side) => {
                     let into = if side == Side::Inside { 1.0 } else { -1.0 };
-                    mesh.feet(&wide(x), f64::from(reach), into, |q, n| add(narrow(&q), narrow(&n), 0.0));
+                    mesh.feet(&wide(x), crate::math::wide(reach), into, |q, n| add(narrow(&q), narrow(&n), 0.0));
                 }
                 (_, Side::Inside) => {
                     solid.face_feet(x, &mut add);

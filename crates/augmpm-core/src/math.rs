@@ -82,6 +82,13 @@ macro_rules! impl_dim_ops {
 impl_dim_ops!(2);
 impl_dim_ops!(3);
 
+/// `x` in double precision, whatever [`Real`] is.
+#[allow(clippy::unnecessary_cast, clippy::useless_conversion)]
+#[inline]
+pub fn wide(x: Real) -> f64 {
+    x as f64
+}
+
 /// `x.floor() as i64` without a libm call (x86-64's baseline has no rounding instruction):
 /// truncate, then step down for negative non-integers. NaN gives 0 and ±∞ the extreme values, as the
 /// cast does (saturating, so no overflow).

@@ -165,9 +165,11 @@ impl TriangleMesh {
                 }
             }
         }
-        let volume: f64 =
-            tris.iter().map(|t| points[t[0] as usize].dot(&points[t[1] as usize].cross(&points[t[2] as usize]))).sum::<f64>()
-                / 6.0;
+        let volume: f64 = tris
+            .iter()
+            .map(|t| points[t[0] as usize].dot(&points[t[1] as usize].cross(&points[t[2] as usize])))
+            .sum::<f64>()
+            / 6.0;
         if volume <= 0.0 {
             return refuse(
                 "triangles",
@@ -177,7 +179,14 @@ impl TriangleMesh {
                 ),
             );
         }
-        let area = tris.iter().map(|t| 0.5 * (points[t[1] as usize] - points[t[0] as usize]).cross(&(points[t[2] as usize] - points[t[0] as usize])).norm()).sum();
+        let area = tris
+            .iter()
+            .map(|t| {
+                0.5 * (points[t[1] as usize] - points[t[0] as usize])
+                    .cross(&(points[t[2] as usize] - points[t[0] as usize]))
+                    .norm()
+            })
+            .sum();
         let edge_normals = (0..tris.len())
             .map(|t| std::array::from_fn(|k| (normals[t] + normals[neighbours[t][k] as usize]).normalize()))
             .collect();
@@ -325,7 +334,8 @@ impl TriangleMesh {
     pub fn sample(&self, spacing: f64) -> Vec<(V, [V; 3])> {
         let fine = spacing / 4.0;
         let radius = spacing - fine;
-        let crease = |t: usize, k: usize| self.normals[t].dot(&self.normals[self.neighbours[t][k] as usize]) < self.crease_cos;
+        let crease =
+            |t: usize, k: usize| self.normals[t].dot(&self.normals[self.neighbours[t][k] as usize]) < self.crease_cos;
         // Distinct normals of the faces around each vertex on a crease.
         let mut around: Vec<Vec<V>> = vec![Vec::new(); self.vertices.len()];
         for (t, tri) in self.triangles.iter().enumerate() {
@@ -360,7 +370,10 @@ impl TriangleMesh {
                 // from both.
                 let a = list[0];
                 let b = *list.iter().min_by(|p, q| a.dot(p).total_cmp(&a.dot(q))).expect("three");
-                let c = *list.iter().max_by(|p, q| a.cross(&b).dot(p).abs().total_cmp(&a.cross(&b).dot(q).abs())).expect("three");
+                let c = *list
+                    .iter()
+                    .max_by(|p, q| a.cross(&b).dot(p).abs().total_cmp(&a.cross(&b).dot(q).abs()))
+                    .expect("three");
                 corners.push((x, [a, b, c]));
             }
         }
@@ -396,10 +409,11 @@ impl TriangleMesh {
         let mut kept: Vec<(V, [V; 3])> = Vec::new();
         for (x, normals) in corners.into_iter().chain(creases).chain(faces) {
             let c = cell(&x);
-            let near = (-1..=1).flat_map(|i| (-1..=1).flat_map(move |j| (-1..=1).map(move |k| (c.x + i, c.y + j, c.z + k))));
-            let taken = near.into_iter().any(|key| {
-                grid.get(&key).is_some_and(|list| list.iter().any(|&p| (kept[p].0 - x).norm() < radius))
-            });
+            let near =
+                (-1..=1).flat_map(|i| (-1..=1).flat_map(move |j| (-1..=1).map(move |k| (c.x + i, c.y + j, c.z + k))));
+            let taken = near
+                .into_iter()
+                .any(|key| grid.get(&key).is_some_and(|list| list.iter().any(|&p| (kept[p].0 - x).norm() < radius)));
             if !taken {
                 grid.entry((c.x, c.y, c.z)).or_default().push(kept.len());
                 kept.push((x, normals));
@@ -425,14 +439,40 @@ pub mod shapes {
     pub fn icosphere(centre: [f64; 3], radius: f64, levels: usize) -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
         let g = (1.0 + 5f64.sqrt()) / 2.0;
         let mut v: Vec<[f64; 3]> = vec![
-            [-1.0, g, 0.0], [1.0, g, 0.0], [-1.0, -g, 0.0], [1.0, -g, 0.0],
-            [0.0, -1.0, g], [0.0, 1.0, g], [0.0, -1.0, -g], [0.0, 1.0, -g],
-            [g, 0.0, -1.0], [g, 0.0, 1.0], [-g, 0.0, -1.0], [-g, 0.0, 1.0],
+            [-1.0, g, 0.0],
+            [1.0, g, 0.0],
+            [-1.0, -g, 0.0],
+            [1.0, -g, 0.0],
+            [0.0, -1.0, g],
+            [0.0, 1.0, g],
+            [0.0, -1.0, -g],
+            [0.0, 1.0, -g],
+            [g, 0.0, -1.0],
+            [g, 0.0, 1.0],
+            [-g, 0.0, -1.0],
+            [-g, 0.0, 1.0],
         ];
         let mut t: Vec<[usize; 3]> = vec![
-            [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2],
-            [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5],
-            [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
         ];
         for _ in 0..levels {
             let mut mid = std::collections::HashMap::new();
@@ -528,7 +568,12 @@ mod tests {
                 assert!(mesh.signed_distance(x).0.abs() < 1e-12);
             }
             for (i, (x, _)) in points.iter().enumerate() {
-                let nearest = points.iter().enumerate().filter(|&(j, _)| j != i).map(|(_, p)| (p.0 - x).norm()).fold(f64::INFINITY, f64::min);
+                let nearest = points
+                    .iter()
+                    .enumerate()
+                    .filter(|&(j, _)| j != i)
+                    .map(|(_, p)| (p.0 - x).norm())
+                    .fold(f64::INFINITY, f64::min);
                 assert!(nearest >= 0.75 * spacing - 1e-12, "two points {nearest} apart");
             }
             let r = uniform(3 * 3000);

@@ -5,14 +5,14 @@
 
 use crate::geometry::{Region, Side};
 use crate::geometry3::{Solid, Wall3, Walls3};
-use crate::mesh::TriangleMesh;
 use crate::grid::GridLayout;
 use crate::material::{ConstitutiveModel, Material};
-use crate::math::{Matrix, Precision, Real, Vector};
+use crate::math::{wide, Matrix, Precision, Real, Vector};
+use crate::mesh::TriangleMesh;
 use crate::particles::Particles;
 use crate::scene::{
-    default_side, friction, inside, one, time_step, AugmentedSpec, MemoryEstimate, SceneError, Seeding, SideSpec, TimeSpec,
-    MAX_GRID_NODES, MAX_SEED_CANDIDATES,
+    default_side, friction, inside, one, time_step, AugmentedSpec, MemoryEstimate, SceneError, Seeding, SideSpec,
+    TimeSpec, MAX_GRID_NODES, MAX_SEED_CANDIDATES,
 };
 use crate::simulation::{Model, Simulation};
 use crate::treatment::augmented::AugmentedGrid;
@@ -194,21 +194,21 @@ pub struct MeshSource {
     /// Edges whose faces' normals differ by more than this are creases (their boundary points carry
     /// both faces' normals); 0.5236 rad is 30°.
     #[serde(default = "crease_angle")]
-    #[schemars(extend("exclusiveMinimum" = 0.0, "maximum" = 3.1416, "unit" = "rad"))]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "maximum" = std::f64::consts::PI, "unit" = "rad"))]
     pub crease_angle: Real,
 }
 
 impl MeshSource {
     /// The vertices placed in the scene (m).
     fn placed(&self) -> Vec<[f64; 3]> {
-        let axis = nalgebra::Vector3::from_iterator(self.axis.iter().map(|&c| f64::from(c)));
+        let axis = nalgebra::Vector3::from_iterator(self.axis.iter().map(|&c| wide(c)));
         let turn = if axis.norm() > 0.0 {
-            nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), f64::from(self.angle))
+            nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), wide(self.angle))
         } else {
             nalgebra::Rotation3::identity()
         };
-        let position = nalgebra::Vector3::from_iterator(self.position.iter().map(|&c| f64::from(c)));
-        let scale = f64::from(self.scale);
+        let position = nalgebra::Vector3::from_iterator(self.position.iter().map(|&c| wide(c)));
+        let scale = wide(self.scale);
         self.vertices.iter().map(|v| (turn * (nalgebra::Vector3::from(*v) * scale) + position).into()).collect()
     }
 
@@ -223,7 +223,7 @@ impl MeshSource {
                 None => SceneError::new(key, "give a mesh file, or vertices and triangles"),
             });
         }
-        TriangleMesh::new(&self.placed(), &self.triangles, f64::from(self.crease_angle))
+        TriangleMesh::new(&self.placed(), &self.triangles, wide(self.crease_angle))
             .map(std::sync::Arc::new)
             .map_err(|e| SceneError::new(format!("{key}.{}", e.key), e.reason))
     }
@@ -240,7 +240,8 @@ impl MeshSource {
     /// Surface area (m²) of the placed mesh.
     fn area(&self) -> Real {
         let v = |i: usize| nalgebra::Vector3::from(self.vertices.get(i).copied().unwrap_or_default());
-        let area: f64 = self.triangles.iter().map(|t| 0.5 * (v(t[1]) - v(t[0])).cross(&(v(t[2]) - v(t[0]))).norm()).sum();
+        let area: f64 =
+            self.triangles.iter().map(|t| 0.5 * (v(t[1]) - v(t[0])).cross(&(v(t[2]) - v(t[0]))).norm()).sum();
         area as Real * self.scale * self.scale
     }
 }

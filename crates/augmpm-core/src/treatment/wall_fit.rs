@@ -12,7 +12,7 @@
 
 use crate::geometry::{WallFeet, MAX_FEET};
 use crate::kernel::{bspline, MlsInverse};
-use crate::math::{Matrix, Real, Vector};
+use crate::math::{wide, Matrix, Real, Vector};
 use crate::wall::{coulomb_kept, WallCondition, WallContact};
 
 /// How far inside a face (cell widths) a particle found past it is taken back to over a step.
@@ -293,13 +293,6 @@ fn each_axis<const D: usize>(target: &Vector<D>, row: &mut impl FnMut(Vector<D>,
         axis[k] = 1.0;
         row(axis, target[k]);
     }
-}
-
-/// `x` in double precision, whatever [`Real`] is.
-#[allow(clippy::unnecessary_cast, clippy::useless_conversion)]
-#[inline]
-fn wide(x: Real) -> f64 {
-    x as f64
 }
 
 /// Solves `(Ω⁻¹ + Uᵀ A⁻¹ U) λ = residual` in f64 (at most [`MAX_ROWS`] unknowns, Gaussian
