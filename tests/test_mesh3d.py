@@ -78,8 +78,9 @@ def test_bad_meshes_are_refused_naming_the_key(change, key, reason):
     v, t, _ = _cube()
     v, t = change(v, t)
     wall = {"type": "mesh", "vertices": v.tolist(), "triangles": t.tolist(), "scale": 0.3, "position": [0.5] * 3}
+    ball = {"shape": "sphere", "center": [0.2] * 3, "radius": 0.1}
     with pytest.raises(augmpm.SceneError) as e:
-        augmpm.Simulation(augmpm.Scene3.from_dict(_scene(wall, {"shape": "sphere", "center": [0.2] * 3, "radius": 0.1})))
+        augmpm.Simulation(augmpm.Scene3.from_dict(_scene(wall, ball)))
     assert e.value.key.startswith(key) and reason in e.value.reason, (e.value.key, e.value.reason)
 
 
