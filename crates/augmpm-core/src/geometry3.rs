@@ -333,20 +333,44 @@ impl Walls3 {
     }
 }
 
+impl Walls3 {
+    /// A bound above wall `i`'s signed distance at `x` that costs nothing where it is a mesh obstacle
+    /// whose bounding box is away from `x` (minus the distance to that box); none where only the exact
+    /// value will do.
+    fn distance_bound(&self, i: usize, x: &P3) -> Option<Real> {
+        match self.walls.get(i) {
+            Some(Wall3 { solid: Solid::Mesh(mesh), side: Side::Outside }) => {
+                let away = mesh.bounds_distance(&wide(x));
+                (away > 0.0).then_some(-away as Real)
+            }
+            _ => None,
+        }
+    }
+
+    /// [`Region::distance`] over every wall but `skip`: the largest signed distance, the first wall to
+    /// reach it on a tie. Meshes come last, and one whose bound cannot reach the largest so far is not
+    /// asked (its nearest-triangle search is the dear part).
+    fn distance_except(&self, x: &P3, skip: Option<usize>) -> WallDistance<3> {
+        let mut best = WallDistance { distance: Real::NEG_INFINITY, normal: P3::zeros(), wall: self.box_index() };
+        let is_mesh = |i: usize| matches!(self.walls.get(i), Some(Wall3 { solid: Solid::Mesh(_), .. }));
+        let all = || (0..=self.walls.len()).filter(|&i| Some(i) != skip);
+        for i in all().filter(|&i| !is_mesh(i)).chain(all().filter(|&i| is_mesh(i))) {
+            if self.distance_bound(i, x).is_some_and(|bound| bound < best.distance) {
+                continue;
+            }
+            let (d, n) = self.wall_distance(i)(x);
+            if d > best.distance || (d == best.distance && i < best.wall) {
+                best = WallDistance { distance: d, normal: n, wall: i };
+            }
+        }
+        best
+    }
+}
+
 impl Region<3> for Walls3 {
     fn distance(&self, x: &P3) -> WallDistance<3> {
         // Intersection of the material sides: the largest signed distance wins.
-        (0..=self.walls.len()).fold(
-            WallDistance { distance: Real::NEG_INFINITY, normal: P3::zeros(), wall: self.box_index() },
-            |best, i| {
-                let (d, n) = self.wall_distance(i)(x);
-                if d > best.distance {
-                    WallDistance { distance: d, normal: n, wall: i }
-                } else {
-                    best
-                }
-            },
-        )
+        self.distance_except(x, None)
     }
 
     fn wall_feet(&self, x: &P3, reach: Real) -> WallFeet<3> {
@@ -360,8 +384,9 @@ impl Region<3> for Walls3 {
             };
             let mut add = |q: P3, normal: P3, curvature: Real| {
                 let distance = (x - q).norm();
-                // A face point counts only where it bounds the material region.
-                if distance < reach && self.distance(&q).distance.abs() <= tolerance {
+                // A face point counts only where it bounds the material region: on its own wall (up to
+                // rounding, far below the tolerance), within no other.
+                if distance < reach && self.distance_except(&q, Some(i)).distance <= tolerance {
                     let foot = WallFoot { curvature, ..WallFoot::still(q, normal, i) };
                     feet.push(foot, distance, tolerance);
                 }

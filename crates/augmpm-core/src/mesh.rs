@@ -21,7 +21,7 @@
 use parry3d_f64::bounding_volume::Aabb;
 use parry3d_f64::na::{Point3, Vector3};
 use parry3d_f64::query::PointQueryWithLocation;
-use parry3d_f64::shape::TriMesh;
+use parry3d_f64::shape::{TriMesh, TrianglePointLocation};
 use std::collections::HashMap;
 
 type V = Vector3<f64>;
@@ -49,6 +49,9 @@ pub struct TriangleMesh {
     area: f64,
     /// Length (m) of the diagonal of the bounding box: the scale of rounding.
     size: f64,
+    /// The bounding box's lowest and highest corners (m).
+    lo: V,
+    hi: V,
 }
 
 impl std::fmt::Debug for TriangleMesh {
@@ -215,6 +218,8 @@ impl TriangleMesh {
             volume,
             area,
             size,
+            lo,
+            hi,
         })
     }
 
@@ -230,8 +235,13 @@ impl TriangleMesh {
 
     /// The lowest and the highest corner (m) of the bounding box.
     pub fn bounds(&self) -> (V, V) {
-        let aabb = self.tree.local_aabb();
-        (aabb.mins.coords, aabb.maxs.coords)
+        (self.lo, self.hi)
+    }
+
+    /// Distance (m) from `x` to the bounding box (0 inside it): a lower bound of the distance to the
+    /// surface from outside the box, for free.
+    pub fn bounds_distance(&self, x: &V) -> f64 {
+        (self.lo - x).sup(&(x - self.hi)).sup(&V::zeros()).norm()
     }
 
     pub fn num_triangles(&self) -> usize {
@@ -265,7 +275,12 @@ impl TriangleMesh {
     /// gradient, or on the surface the pseudo-normal there.
     pub fn signed_distance(&self, x: &V) -> (f64, V) {
         let (q, t) = self.nearest(x);
-        let pseudo = match self.feature(t, &q) {
+        self.signed_from(x, &q, t)
+    }
+
+    /// The signed distance and outward normal at `x` from its nearest surface point `q`, on triangle `t`.
+    fn signed_from(&self, x: &V, q: &V, t: usize) -> (f64, V) {
+        let pseudo = match self.feature(t, q) {
             Feature::Vertex(k) => self.vertex_normals[self.triangles[t][k] as usize],
             Feature::Edge(k) => self.edge_normals[t][k],
             Feature::Face => self.normals[t],
@@ -283,8 +298,12 @@ impl TriangleMesh {
     /// The feet of `x` on the surface within `reach` (m): the nearest point, and the perpendiculars that
     /// land inside a face facing `x`; of feet whose normals differ by less than the crease angle (one
     /// smooth patch) only the nearest. `into` is +1 where the wall lies outside the mesh (a container),
-    /// −1 where it lies inside (an obstacle); `add` gets each foot and its normal into the wall.
+    /// −1 where it lies inside (an obstacle); `add` gets each foot and its normal into the wall. One pass
+    /// over the triangles whose boxes lie within `reach` finds both.
     pub fn feet(&self, x: &V, reach: f64, into: f64, mut add: impl FnMut(V, V)) {
+        if self.bounds_distance(x) >= reach {
+            return;
+        }
         const MOST: usize = 16;
         let mut found = [(V::zeros(), V::zeros(), f64::INFINITY); MOST];
         let mut len = 0;
@@ -298,22 +317,29 @@ impl TriangleMesh {
                 }
             }
         };
-        let (d, n) = self.signed_distance(x);
-        if d.abs() < reach {
-            offer(x - n * d, n * into, d.abs());
-        }
         let tolerance = f64::EPSILON.sqrt() * reach;
+        let point = Point3::from(*x);
         let aabb = Aabb::new(Point3::from(x - V::repeat(reach)), Point3::from(x + V::repeat(reach)));
+        let mut nearest: Option<(f64, V, usize)> = None;
         for t in self.tree.bvh().intersect_aabb(&aabb) {
-            let t = t as usize;
-            let normal = self.normals[t];
-            let q = x - normal * normal.dot(&(x - self.vertices[self.triangles[t][0] as usize]));
+            let (projection, location) = self.tree.triangle(t).project_local_point_and_get_location(&point, false);
+            let (q, t) = (projection.point.coords, t as usize);
             let distance = (x - q).norm();
-            let inside = barycentric(&q, self.corners(t)).iter().all(|&b| b >= -1e-12);
-            // Facing: the face lies ahead of x along its normal into the wall.
-            if inside && distance < reach && (q - x).dot(&(normal * into)) >= -tolerance {
-                offer(q, normal * into, distance);
+            if distance >= reach {
+                continue;
             }
+            if nearest.is_none_or(|(best, ..)| distance < best) {
+                nearest = Some((distance, q, t));
+            }
+            // Facing: the face lies ahead of x along its normal into the wall.
+            let normal = self.normals[t] * into;
+            if matches!(location, TrianglePointLocation::OnFace(..)) && (q - x).dot(&normal) >= -tolerance {
+                offer(q, normal, distance);
+            }
+        }
+        if let Some((distance, q, t)) = nearest {
+            let (_, n) = self.signed_from(x, &q, t);
+            offer(q, n * into, distance);
         }
         let found = &mut found[..len];
         found.sort_by(|a, b| a.2.total_cmp(&b.2));
