@@ -42,15 +42,30 @@ pub struct WallFoot<const D: usize> {
     /// The face's normal at the end of the step (a turning wall turns it; `normal` for a still one): a
     /// particle on a straight face that moves with it must end the step on the face where it is then.
     pub normal_next: Vector<D>,
-    /// How far (m) the particle lies past the face, when it does ([`WallFeet::pin_past`]); else 0.
+    /// How far (m) the particle lies past the face (negative: inside it) where [`WallFeet::pin_past`]
+    /// pinned the foot to the particle; −∞ where it did not.
     pub depth: Real,
 }
 
 impl<const D: usize> WallFoot<D> {
+    /// Whether [`WallFeet::pin_past`] pinned the foot to its particle (past the face or within the margin).
+    pub fn is_pinned(&self) -> bool {
+        self.depth > Real::NEG_INFINITY
+    }
+
     /// A foot at `x` on a still straight face of wall `wall` whose normal (into the wall) is `normal`.
     pub fn still(x: Vector<D>, normal: Vector<D>, wall: usize) -> Self {
         let zero = Vector::<D>::zeros();
-        Self { x, normal, wall, velocity: zero, curvature: 0.0, centre_velocity: zero, normal_next: normal, depth: 0.0 }
+        Self {
+            x,
+            normal,
+            wall,
+            velocity: zero,
+            curvature: 0.0,
+            centre_velocity: zero,
+            normal_next: normal,
+            depth: Real::NEG_INFINITY,
+        }
     }
 }
 
@@ -99,16 +114,17 @@ impl<const D: usize> WallFeet<D> {
         self.feet[..self.len].iter().flatten()
     }
 
-    /// For a particle at `x` that lies on or past the walls: moves the foot of each face it lies past
-    /// to `x` itself, so that the fit meets that face's condition at the particle. At the foot behind it
-    /// the fit would leave the particle a normal velocity `r n·C n` outward (r its depth), and a normal
-    /// strain rate that persists (a lone particle sliding along a ceiling keeps its C) would carry it
-    /// out exponentially from wherever rounding put it.
-    /// Its depth past the face is kept in `depth`.
-    pub fn pin_past(&mut self, x: &Vector<D>) {
+    /// For a particle at `x` that lies past the walls or within `margin` (m) of them: moves the foot of
+    /// each face it lies past, or within `margin` of, to `x` itself, so that the fit meets that face's
+    /// condition at the particle. At the foot behind it the fit would leave the particle a normal velocity
+    /// `r n·C n` outward (r its depth), and a normal strain rate that persists (a lone particle sliding
+    /// along a ceiling keeps its C) would carry it out exponentially from wherever rounding put it; one
+    /// sliding on a face would step in and out of it by rounding.
+    /// Its depth past the face (negative within the margin) is kept in `depth`.
+    pub fn pin_past(&mut self, x: &Vector<D>, margin: Real) {
         for foot in self.feet[..self.len].iter_mut().flatten() {
             let depth = (x - foot.x).dot(&foot.normal);
-            if depth >= 0.0 {
+            if depth >= -margin {
                 foot.x = *x;
                 foot.depth = depth;
             }
@@ -835,8 +851,16 @@ impl Region<2> for Walls2 {
                 } else {
                     normal
                 };
-                let foot =
-                    WallFoot { x: q, normal, wall, velocity, curvature, centre_velocity, normal_next, depth: 0.0 };
+                let foot = WallFoot {
+                    x: q,
+                    normal,
+                    wall,
+                    velocity,
+                    curvature,
+                    centre_velocity,
+                    normal_next,
+                    depth: Real::NEG_INFINITY,
+                };
                 feet.push(foot, (x - q).norm(), tolerance);
             }
         };

@@ -526,9 +526,14 @@ where
                         }
                         AugmentedTransfer::Stable => {
                             let mut feet = region.wall_feet(xp, WALL_REACH * h);
-                            // Only a particle with a face in reach can lie past one (then its distance says so).
-                            if !feet.is_empty() && !g.surely_inside(layout, xp) && region.distance(xp).distance >= 0.0 {
-                                feet.pin_past(xp);
+                            // Only a particle with a face in reach can lie past one, or within the pull's
+                            // margin of one (then its distance says so).
+                            let margin = crate::treatment::wall_fit::PULL_MARGIN * h;
+                            if !feet.is_empty()
+                                && !g.surely_inside(layout, xp)
+                                && region.distance(xp).distance >= -margin
+                            {
+                                feet.pin_past(xp, margin);
                             }
                             push = crate::treatment::wall_fit::fit_to_walls(
                                 minv,

@@ -151,7 +151,7 @@ pub fn fit_to_walls<const D: usize>(
         // so its velocity along the face's normal at the end of the step is the wall point's.
         let n = if contact.moving && foot.curvature == 0.0 { foot.normal_next } else { n };
         // A face the particle lies past asks it back inside (`pull_back`), the same for every such face.
-        let (pull, pulled) = if foot.depth > 0.0 { (pull, -n.dot(&pull)) } else { (zero, 0.0) };
+        let (pull, pulled) = if foot.is_pinned() { (pull, -n.dot(&pull)) } else { (zero, 0.0) };
         let mut row = |n: Vector<D>, target: Real| {
             if len < MAX_ROWS {
                 rows[len] = Row { wall: foot.wall, n, d, q0, q, inv_weight, residual: target - n.dot(&fitted) };
@@ -222,14 +222,16 @@ pub fn fit_to_walls<const D: usize>(
 /// normals depend on the others add nothing), shortened to PULL_MAX cells a step where faces at a sharp
 /// angle would ask for more. Zero for a particle past no face. Its part along each
 /// face goes into the wall conditions' targets there, so that rounding cannot leave a particle past a
-/// wall for good (a particle on a face stays on it, in or out by rounding).
+/// wall for good; one within the margin of a face (pinned there, `depth` > −margin) is asked to the
+/// margin, so that a particle sliding on a face keeps the margin from it instead of stepping in and out
+/// of it by rounding.
 fn pull_back<const D: usize>(feet: &WallFeet<D>, h: Real, dt: Real) -> Vector<D> {
     let mut normals = [Vector::<D>::zeros(); MAX_FEET];
     let mut k = [[0.0f64; MAX_FEET + 1]; MAX_FEET];
     let mut m = 0;
-    for foot in feet.iter().filter(|f| f.depth > 0.0) {
+    for foot in feet.iter().filter(|f| f.is_pinned()) {
         normals[m] = foot.normal;
-        k[m][MAX_FEET] = -wide((foot.depth.min(PULL_MAX * h) + PULL_MARGIN * h) / dt);
+        k[m][MAX_FEET] = -wide((foot.depth.min(PULL_MAX * h) + PULL_MARGIN * h).max(0.0) / dt);
         m += 1;
     }
     if m == 0 || dt <= 0.0 {
@@ -377,12 +379,21 @@ mod tests {
         let (mut v, mut c) = (Vector2::new(1.0, 0.0), stretch);
         fit_to_walls(&minv, &x, &feet, &[WallCondition::Slip.into()], (h, 1e-3), &mut v, &mut c);
         assert!((v.dot(&normal) - depth * 20.0).abs() < 1e-6 * depth * 20.0, "at the foot: {v}");
-        feet.pin_past(&x);
+        feet.pin_past(&x, PULL_MARGIN * h);
         let (mut v, mut c) = (Vector2::new(1.0, 0.0), stretch);
         fit_to_walls(&minv, &x, &feet, &[WallCondition::Slip.into()], (h, 1e-3), &mut v, &mut c);
         let back = -(depth + PULL_MARGIN * h) / 1e-3;
         assert!((v.dot(&normal) - back).abs() < 1e-8 * back.abs() && (v.x - 1.0).abs() < 1e-12, "pinned: {v}");
         assert!(x.y + v.y * 1e-3 < 0.8, "inside after the step");
+        // Sliding on the ceiling, rounding away from it (a few ulp inside, within the margin): pinned and
+        // asked to the margin, so that rounding cannot carry it out next.
+        let on = Vector2::new(0.5, 0.8 - 4e-16);
+        let mut feet = foot(Vector2::new(0.5, 0.8), normal, 0.0);
+        feet.pin_past(&on, PULL_MARGIN * h);
+        let (mut v, mut c) = (Vector2::new(1.0, 0.0), stretch);
+        fit_to_walls(&minv, &on, &feet, &[WallCondition::Slip.into()], (h, 1e-3), &mut v, &mut c);
+        let back = -(PULL_MARGIN * h + (on.y - 0.8)) / 1e-3;
+        assert!(on.y < 0.8 && (v.dot(&normal) - back).abs() < 1e-9 * back.abs(), "on the face: {v}");
     }
 
     /// A particle on a rough separate floor (μ = 0.5) whose fit presses into it at 1 m/s while sliding
@@ -419,7 +430,7 @@ mod tests {
             let foot = WallFoot::still(foot, normal, 0);
             feet.push(foot, 1e-7, 1e-12);
         }
-        feet.pin_past(&x);
+        feet.pin_past(&x, PULL_MARGIN * h);
         let (mut v, mut c) = (Vector2::new(0.3, -0.7), Matrix2::new(1.0, 2.0, 3.0, 4.0));
         fit_to_walls(&minv, &x, &feet, &[WallCondition::Sticky.into()], (h, 1e-3), &mut v, &mut c);
         let back = -(1e-7 + PULL_MARGIN * h) / 1e-3;
