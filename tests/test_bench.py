@@ -69,3 +69,22 @@ def test_memory_is_measured_in_a_fresh_process():
     m = bench._memory_in_subprocess(128, "naive", "f64")
     assert 128 <= m["peak_bytes_per_particle"] < 2_000
     assert 128 <= m["per_particle_without_grid"] < 200
+
+
+def test_3d_dam_break_sizes_bench_and_report():
+    """The 3D dam break: ~20k particles on 32³ (~160k on 64³, ~1M on 128³ by the same rule), its water
+    against the turned tank's walls (a fifth of its particles within two cells of one); one short
+    interleaved measurement of every precision and method gives rates, the augmented/naive ratio, memory
+    in a fresh process, and rows of the report's table."""
+    from augmpm.simulation import Simulation
+
+    sim = Simulation(bench.dam_break_3d_scene(32), "augmented")
+    assert 15_000 < sim.num_particles < 25_000 and sim.dim == 3
+    assert (sim.wall_distance(sim.positions) > -2 * sim.cell_size).mean() > 0.2
+    rows = bench.bench_dam_break(32, steps=4, threads=(1,), dim=3)
+    assert [(r["precision"], r["method"]) for r in rows] == [(p, m) for p in bench.PRECISIONS for m in bench.METHODS]
+    for r in rows:
+        assert r["case"] == "dam_break_3d_32" and r["steps"] == 4 and r["particle_steps_per_s"] > 0
+        assert r["augmented_over_naive"] > 0 and r["memory"]["peak_bytes_per_particle"] > 100
+    text = bench.format_report({"machine": bench._machine(1), "quick": True, "rows": rows})
+    assert "| 32³ | " in text and "dam_break_3d_32 f32 augmented 1t" in text

@@ -9,6 +9,8 @@ Cases (issue 5):
   inclined walls) at three sizes, ~8k particles on 128², ~65k on 256², ~530k on 512²: f64 and
   f32, naive and augmented, on 1 and on 2 threads: particle-steps per second, the augmented/naive
   cost ratio, the 2-thread speed-up, peak memory per particle, and the time split per stage;
+- a 3D fluid dam break in a box tank turned 20° about an axis in no coordinate plane, ~20k particles
+  on 32³, ~160k on 64³ and ~1M on 128³: f64 and f32, naive and augmented, on the chosen threads;
 - the cost of output: a paper-scene run with every output (frames, images, animation) against the
   same run without.
 
@@ -32,7 +34,7 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-from augmpm.scene import SHIPPED_SCENES, Scene, load_scene, scene_path
+from augmpm.scene import SHIPPED_SCENES, Scene, Scene3, load_scene, scene_path
 from augmpm.simulation import Simulation
 
 #: The authors' code on this machine kind, Fig. 1 scene, 10,000 steps, one thread (s).
@@ -42,6 +44,8 @@ FIG1_STEPS = 10_000
 DEFAULT_FIG1 = SHIPPED_SCENES / "paper" / "fluid_incline_noslip.toml"
 #: Dam-break sizes: grid resolution → (particles per cell, part of the tank's width filled).
 DAM_BREAK_SIZES = {128: (4, 0.22), 256: (4, 0.44), 512: (8, 0.44)}
+#: 3D dam-break sizes: grid resolution → particles per cell.
+DAM_BREAK_3D_SIZES = {32: 8, 64: 8, 128: 6}
 METHODS = ("naive", "augmented")
 PRECISIONS = ("f64", "f32")
 STAGES = ("sort", "density", "boundary", "p2g", "grid", "g2p")
@@ -78,14 +82,48 @@ def dam_break_scene(resolution: int) -> Scene:
                     "shape": "polygon",
                     "vertices": water,
                     "seeding": {"per_cell": per_cell},
-                    "material": {
-                        "type": "fluid",
-                        "density": 1000.0,
-                        "stiffness": 2.0e4,
-                        "gamma": 7.0,
-                        "viscosity": 0.5,
-                        "min_pressure": 0.0,
-                    },
+                    "material": _BENCH_FLUID,
+                }
+            ],
+        }
+    )
+
+
+#: The 3D dam break's fluid: that of the 2D one.
+_BENCH_FLUID = {
+    "type": "fluid",
+    "density": 1000.0,
+    "stiffness": 2.0e4,
+    "gamma": 7.0,
+    "viscosity": 0.5,
+    "min_pressure": 0.0,
+}
+
+
+def dam_break_3d_scene(resolution: int) -> Scene3:
+    """A water column against one side of a cubic tank (edge 0.8 m) turned 20° about (1, 0.2, 0.6) in the
+    unit domain: the part of the box [0, 0.35] × [0, 0.5] × [0, 1] m inside the tank; gravity −9.81 m/s²
+    along y, CFL 0.5 time step, slip walls."""
+    axis = [1.0, 0.2, 0.6]
+    return Scene3.from_dict(
+        {
+            "name": f"bench_dam_break_3d_{resolution}",
+            "seed": 1,
+            "gravity": [0.0, -9.81, 0.0],
+            "wall_condition": "slip",
+            "grid": {"domain": [1.0, 1.0, 1.0], "resolution": resolution},
+            "time": {"cfl": 0.5, "steps": 100, "output_interval": 100},
+            "walls": [
+                {"type": "box", "center": [0.5] * 3, "size": [0.8] * 3, "axis": axis, "angle": math.radians(20.0)}
+            ],
+            "bodies": [
+                {
+                    "shape": "box",
+                    "min": [0.0, 0.0, 0.0],
+                    "max": [0.35, 0.5, 1.0],
+                    "fill": True,
+                    "seeding": {"per_cell": DAM_BREAK_3D_SIZES[resolution]},
+                    "material": _BENCH_FLUID,
                 }
             ],
         }
@@ -155,26 +193,32 @@ def bench_fig1(path: Path, steps: int, threads: int) -> list[dict]:
     return rows
 
 
-def bench_dam_break(resolution: int, steps: int, threads: tuple[int, ...]) -> list[dict]:
-    """One size: every precision × method × thread count interleaved, after 3 warm-up steps each."""
+def bench_dam_break(resolution: int, steps: int, threads: tuple[int, ...], dim: int = 2) -> list[dict]:
+    """One size of the 2D (``dim`` 2) or 3D dam break: every precision × method × thread count interleaved,
+    after 3 warm-up steps each."""
     configs = [(p, m, t) for p in PRECISIONS for m in METHODS for t in threads]
     sims = {}
     for p, m, t in configs:
-        scene = dam_break_scene(resolution).model_copy(update={"precision": p})
+        scene = _dam_break(resolution, dim).model_copy(update={"precision": p})
         sims[f"{p}/{m}/{t}"] = Simulation(scene, m, threads=t)
         sims[f"{p}/{m}/{t}"].step(3)
     result = interleaved(sims, steps, rounds=4)
     rows = []
+    case = f"dam_break_{resolution}" if dim == 2 else f"dam_break_3d_{resolution}"
     for p, m, t in configs:
         r = result[f"{p}/{m}/{t}"]
-        row = {"case": f"dam_break_{resolution}", "method": m, "threads": t, "precision": p, **r}
+        row = {"case": case, "dim": dim, "method": m, "threads": t, "precision": p, **r}
         naive, one = result[f"{p}/naive/{t}"], result[f"{p}/{m}/1"] if 1 in threads else None
         row["augmented_over_naive"] = naive["particle_steps_per_s"] / r["particle_steps_per_s"]
         if one is not None:
             row["speedup_over_1_thread"] = r["particle_steps_per_s"] / one["particle_steps_per_s"]
-        row["memory"] = _memory_in_subprocess(resolution, m, p)
+        row["memory"] = _memory_in_subprocess(resolution, m, p, dim)
         rows.append(row)
     return rows
+
+
+def _dam_break(resolution: int, dim: int) -> Scene | Scene3:
+    return dam_break_scene(resolution) if dim == 2 else dam_break_3d_scene(resolution)
 
 
 #: Shipped scenes whose walls move, timed against themselves with the walls held still.
@@ -216,10 +260,10 @@ def bench_moving(steps: int, threads: int) -> list[dict]:
     return rows
 
 
-def _memory_in_subprocess(resolution: int, method: str, precision: str = "f64") -> dict:
+def _memory_in_subprocess(resolution: int, method: str, precision: str = "f64", dim: int = 2) -> dict:
     """Peak memory of building and stepping one dam break, in a fresh process."""
     base = _baseline()
-    run = _worker(["memory", str(resolution), method, precision])
+    run = _worker(["memory", str(resolution), method, precision, str(dim)])
     peak = run["max_rss"] - base["max_rss"]
     n = run["particles"]
     return {
@@ -309,6 +353,10 @@ def run_bench(
     for res in sizes:
         log(f"dam break {res}², {steps[res]} steps, threads {thread_counts} …")
         report["rows"] += bench_dam_break(res, steps[res], thread_counts)
+    steps3 = {32: 40, 64: 8} if quick else {32: 200, 64: 40, 128: 8}
+    for res in steps3:
+        log(f"dam break 3D {res}³, {steps3[res]} steps, threads {threads} …")
+        report["rows"] += bench_dam_break(res, steps3[res], (threads,), dim=3)
     moving_steps = 300 if quick else 1_500
     log(f"moving walls ({', '.join(MOVING_SCENES)}), {moving_steps} steps, moving and still …")
     report["rows"] += bench_moving(moving_steps, threads)
@@ -354,6 +402,11 @@ def format_report(report: dict) -> str:
             )
         lines.append("")
     dam = [r for r in report["rows"] if r["case"].startswith("dam_break")]
+
+    def size(r: dict) -> str:
+        res = r["case"].removeprefix("dam_break_3d_").removeprefix("dam_break_")
+        return f"{res}³" if r.get("dim") == 3 else f"{res}²"
+
     if dam:
         lines += [
             "| dam break | particles | precision | method | threads | M particle-steps/s | aug./naive | vs 1 thread "
@@ -365,12 +418,12 @@ def format_report(report: dict) -> str:
             mem = r["memory"]
             if "error" in r:
                 lines.append(
-                    f"| {r['case'].removeprefix('dam_break_')}² | {r['particles']:,} | {r['precision']} "
+                    f"| {size(r)} | {r['particles']:,} | {r['precision']} "
                     f"| {r['method']} | {r['threads']} | failed: {r['error']} | | | | |"
                 )
                 continue
             lines.append(
-                f"| {r['case'].removeprefix('dam_break_')}² | {r['particles']:,} | {r['precision']} | {r['method']} "
+                f"| {size(r)} | {r['particles']:,} | {r['precision']} | {r['method']} "
                 f"| {r['threads']} "
                 f"| {r['particle_steps_per_s'] / 1e6:.1f} | {r['augmented_over_naive']:.2f} | {speedup} "
                 f"| {mem['peak_bytes_per_particle']:.0f} | {mem['per_particle_without_grid']:.0f} |"
@@ -409,8 +462,8 @@ def _main_worker(argv: list[str]) -> None:
     if argv[0] == "baseline":
         print(json.dumps({"max_rss": _max_rss_bytes()}))
         return
-    _, res, method, precision = argv
-    sim = Simulation(dam_break_scene(int(res)).model_copy(update={"precision": precision}), method)
+    _, res, method, precision, dim = argv
+    sim = Simulation(_dam_break(int(res), int(dim)).model_copy(update={"precision": precision}), method)
     sim.step(2)
     print(json.dumps({"max_rss": _max_rss_bytes(), "particles": sim.num_particles, "accounted": sim.memory_use()}))
 

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from augmpm._core import SimulationError
-from augmpm.scene import Scene
+from augmpm.scene import scene_class
 from augmpm.simulation import Simulation
 
 METHODS = ("naive", "augmented")
@@ -76,9 +76,9 @@ def simulate(
     sample_times: list[float],
     sample: Callable[[Simulation], object],
 ) -> tuple[list[object], Simulation]:
-    """Runs `scene` with `method` and calls `sample(sim)` at each of `sample_times` (s, increasing).
+    """Runs `scene` (2D or 3D) with `method` and calls `sample(sim)` at each of `sample_times` (s, increasing).
     Raises `CaseFailed` when the simulation fails."""
-    sim = Simulation(Scene.from_dict(scene), method)
+    sim = Simulation(scene_class(scene).from_dict(scene), method)
     out = []
     for t in sample_times:
         n = max(0, round((t - sim.time) / sim.dt))

@@ -55,6 +55,33 @@ def _scene(angle: float, resolution: int, corrected: bool, density: str = "defor
     return scene, material
 
 
+def layer_pressures(
+    y: np.ndarray, rho: np.ndarray, wall: np.ndarray, mat: dict, h: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """The pressure of a column at rest against ρg(y_s − y), from the particles' heights `y` (m), densities
+    and distances to the walls (m), in layers one cell `h` thick, over the bulk: 3h or more below the
+    surface and from the walls (the grid density reads low within the kernel's reach, 1.5h, of a free
+    surface, and of a wall unless corrected, plus a particle spacing).
+
+    Returns the layers' heights, the residual of the equation of state of each layer's mean density (the
+    densities are noisy, 4 particles per cell, and the EOS's power γ = 7 would turn the noise into a
+    pressure bias: the mean first), the layer means of the particles' own pressures (unbiased) and their
+    residual, and the surface height y_s fitted to the latter (m)."""
+    surface = np.percentile(y, 99.5)
+    bulk = (wall < -3 * h) & (y < surface - 3 * h)
+    layer = np.floor(y[bulk] / h).astype(int)
+    ids = np.unique(layer)
+    y_l = np.array([y[bulk][layer == k].mean() for k in ids])
+    rho_l = np.array([rho[bulk][layer == k].mean() for k in ids])
+    eos = lambda r: np.maximum(mat["stiffness"] * ((r / mat["density"]) ** mat["gamma"] - 1), mat["min_pressure"])  # noqa: E731
+    p_l = eos(rho_l)
+    residual = p_l - RHO * G * (float(np.mean(y_l + p_l / (RHO * G))) - y_l)
+    p = eos(rho[bulk])
+    pm_l = np.array([p[layer == k].mean() for k in ids])
+    y_s = float(np.mean(y_l + pm_l / (RHO * G)))
+    return y_l, residual, pm_l, pm_l - RHO * G * (y_s - y_l), y_s
+
+
 def run(quick: bool, angles: list[float]) -> tuple[list[Record], dict]:
     resolution = 64 if quick else 128
     t_end = 0.6 if quick else 1.0
@@ -76,27 +103,8 @@ def run(quick: bool, angles: list[float]) -> tuple[list[Record], dict]:
                 records.append(Record.failed_run(case, method, angle, resolution, e))
                 continue
             x, rho, vmax, wall = samples[-1]
-            # Particle densities from the grid are noisy (4 particles per cell), so they are averaged in
-            # layers one cell thick before the equation of state (whose power γ = 7 would turn the noise
-            # into a pressure bias); the free surface height y_s is fitted to
-            # p = ρg(y_s − y) over the layers 3h or more below the surface and from the walls: the grid
-            # density reads low within the kernel's reach (1.5h) of a free surface, and of a wall
-            # unless corrected, plus a particle spacing.
-            surface = np.percentile(x[:, 1], 99.5)
-            bulk = (wall < -3 * h) & (x[:, 1] < surface - 3 * h)
-            layer = np.floor(x[bulk, 1] / h).astype(int)
-            ids = np.unique(layer)
-            y_l = np.array([x[bulk, 1][layer == k].mean() for k in ids])
-            rho_l = np.array([rho[bulk][layer == k].mean() for k in ids])
-            p_l = np.maximum(mat["stiffness"] * ((rho_l / mat["density"]) ** mat["gamma"] - 1), mat["min_pressure"])
-            y_s = float(np.mean(y_l + p_l / (RHO * G)))
-            residual = p_l - RHO * G * (y_s - y_l)
-            # Unbiased beside it: the layer mean of the particles' own pressures (the EOS of the layer
-            # mean density is biased by γ = 7 when densities are noisy), its surface fitted the same way.
-            p = np.maximum(mat["stiffness"] * ((rho[bulk] / mat["density"]) ** mat["gamma"] - 1), mat["min_pressure"])
-            pm_l = np.array([p[layer == k].mean() for k in ids])
-            residual_mean = pm_l - RHO * G * (float(np.mean(y_l + pm_l / (RHO * G))) - y_l)
-            data[(method, angle, case)] = (y_l, pm_l, float(np.mean(y_l + pm_l / (RHO * G))))
+            y_l, residual, pm_l, residual_mean, y_s = layer_pressures(x[:, 1], rho, wall, mat, h)
+            data[(method, angle, case)] = (y_l, pm_l, y_s)
             scale = RHO * G * DEPTH
             rec = lambda metric, value, tol, m=method, a=angle, c=case, j=judged: records.append(  # noqa: E731
                 Record(c, m, a, resolution, metric, float(value), tol if j else None)

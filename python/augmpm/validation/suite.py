@@ -11,7 +11,17 @@ from pathlib import Path
 import numpy as np
 
 from augmpm.files import save_png, write_text
-from augmpm.validation import channel, dam_break, hydrostatic, incline, incline3d, interpolation, moving, rotation
+from augmpm.validation import (
+    channel,
+    dam_break,
+    hydrostatic,
+    hydrostatic3d,
+    incline,
+    incline3d,
+    interpolation,
+    moving,
+    rotation,
+)
 from augmpm.validation.records import Record
 
 ANGLES = [0.0, 15.0, 30.0, 45.0]
@@ -158,6 +168,19 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
         ax.set(xlabel="depth (m)", ylabel="pressure (Pa)", title="Hydrostatic column, walls at 30°")
 
     plots.append(("Hydrostatic pressure", _plot_simple(out, "hydrostatic.png", draw_hyd)))
+
+    hyd3 = stage("3D: hydrostatic column in a tilted box", lambda: hydrostatic3d.run(quick))
+
+    def draw_hyd3(ax):
+        for (method, angle), (y, p, y_s) in hyd3.items():
+            marker = "o" if angle == 30.0 else "."
+            ax.plot(y_s - y, p, marker, ms=3, color=COLOURS[method], label=f"{method} {angle:g}°")
+        depth = np.linspace(0, max((y_s - min(y) for y, _, y_s in hyd3.values()), default=0.2), 10)
+        ax.plot(depth, hydrostatic.RHO * hydrostatic.G * depth, "k-", label="ρ g (H − y)")
+        title = "3D: hydrostatic column, box turned about (1, 0.2, 0.6)"
+        ax.set(xlabel="depth (m)", ylabel="pressure (Pa)", title=title)
+
+    plots.append(("3D: hydrostatic pressure in a tilted box", _plot_simple(out, "hydrostatic3d.png", draw_hyd3)))
 
     rot = stage("rotation in a circular container", lambda: rotation.run(quick))
 
