@@ -650,18 +650,10 @@ impl Scene3 {
         area / (spacing * spacing) * 1.5
     }
 
-    /// Validates the scene and builds the simulation; returns warnings beside it.
-    pub fn build(&self, method: Method) -> Result<(Simulation<3>, Vec<String>), SceneError> {
-        if self.precision != Precision::NATIVE {
-            return Err(SceneError::new(
-                "precision",
-                format!("this engine runs {:?} scenes, not {:?}", Precision::NATIVE, self.precision),
-            ));
-        }
+    /// The grid, the walls and their treatment by `method`, without the bodies (the interpolation test's
+    /// grid).
+    pub fn build_walls(&self, method: Method) -> Result<(GridLayout<3>, Walls3, Boundary<3>), SceneError> {
         self.validate()?;
-        if self.bodies.is_empty() {
-            return Err(SceneError::new("bodies", "a scene needs at least one body"));
-        }
         let layout = self.layout()?;
         let h = layout.h;
         let (region, contacts) = self.walls()?;
@@ -682,6 +674,23 @@ impl Scene3 {
                 )
             }
         };
+        Ok((layout, region, boundary))
+    }
+
+    /// Validates the scene and builds the simulation; returns warnings beside it.
+    pub fn build(&self, method: Method) -> Result<(Simulation<3>, Vec<String>), SceneError> {
+        if self.precision != Precision::NATIVE {
+            return Err(SceneError::new(
+                "precision",
+                format!("this engine runs {:?} scenes, not {:?}", Precision::NATIVE, self.precision),
+            ));
+        }
+        self.validate()?;
+        if self.bodies.is_empty() {
+            return Err(SceneError::new("bodies", "a scene needs at least one body"));
+        }
+        let (layout, region, boundary) = self.build_walls(method)?;
+        let h = layout.h;
         let mut particles = Particles::<3>::default();
         for (b, body) in self.bodies.iter().enumerate() {
             let key = format!("bodies[{b}]");

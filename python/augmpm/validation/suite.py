@@ -19,6 +19,7 @@ from augmpm.validation import (
     incline,
     incline3d,
     interpolation,
+    interpolation3d,
     moving,
     rotation,
 )
@@ -206,17 +207,26 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
 
     plots.append(("Dam break", _plot_simple(out, "dam_break.png", draw_dam)))
 
+    def draw_interpolation(results: dict, curved: str, title: str) -> Callable:
+        """RMS errors against resolution: the curved wall's field and the plane's at 30°, per method."""
+
+        def draw(ax):
+            for (kind, angle, method), (levels, rms) in results.items():
+                if kind == curved or angle == 30.0:
+                    label = f"{kind} {method}" if kind == curved else f"{kind} 30° {method}"
+                    style = "o-" if kind == curved else "s--"
+                    ax.loglog(levels, np.maximum(rms, 1e-17), style, color=COLOURS[method], label=label)
+            ax.set(xlabel="cells per unit length", ylabel="RMS error within 2h (m)", title=title)
+
+        return draw
+
     itp = stage("interpolation near walls", lambda: interpolation.run(quick, angles))
-
-    def draw_itp(ax):
-        for (kind, angle, method), (levels, rms) in itp.items():
-            if kind == "circle" or angle == 30.0:
-                label = f"{kind} {method}" if kind == "circle" else f"{kind} 30° {method}"
-                style = "o-" if kind == "circle" else "s--"
-                ax.loglog(levels, np.maximum(rms, 1e-17), style, color=COLOURS[method], label=label)
-        ax.set(xlabel="cells per unit length", ylabel="RMS error within 2h (m)", title="Interpolation near walls")
-
+    draw_itp = draw_interpolation(itp, "circle", "Interpolation near walls")
     plots.append(("Interpolation", _plot_simple(out, "interpolation.png", draw_itp)))
+
+    itp3 = stage("3D: interpolation near a plane and a sphere", lambda: interpolation3d.run(quick, angles))
+    draw_itp3 = draw_interpolation(itp3, "sphere", "3D: interpolation near a plane and a sphere")
+    plots.append(("3D: interpolation", _plot_simple(out, "interpolation3d.png", draw_itp3)))
 
     write_text(out / "results.json", json.dumps([r.to_json() for r in records], indent=1))
     write_text(out / "report.md", report(records, plots, quick))
