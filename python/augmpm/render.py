@@ -316,7 +316,11 @@ class FrameRenderer:
         img = self.background.copy()
         h, w = img.shape[:2]
         changed = np.zeros(-(-h // _BandPng.BAND), dtype=bool)
-        if walls:
+        if walls and self._camera is not None:
+            # 3D: the walls' surface points where they are now, grey, darker nearer the viewer.
+            top, bottom = self._surface(img, np.vstack(walls))
+            changed[top // _BandPng.BAND : -(-bottom // _BandPng.BAND)] = True
+        elif walls:
             top, bottom = self._outlines(img, walls)
             changed[top // _BandPng.BAND : -(-bottom // _BandPng.BAND)] = True
         dim = 3 if self._camera is not None else 2
@@ -344,6 +348,19 @@ class FrameRenderer:
         top, bottom = self._caption(img, f"{self.title}  t = {time:.4f} s".strip())
         changed[top // _BandPng.BAND : -(-bottom // _BandPng.BAND)] = True
         return img, changed
+
+    def _surface(self, img: np.ndarray, points: np.ndarray) -> tuple[int, int]:
+        """Draws 3D wall points (N, 3) in m as single grey pixels, as the background draws still walls;
+        returns the rows it may have changed, [top, bottom)."""
+        h, w = img.shape[:2]
+        near = self._camera.nearness(points)
+        order = np.argsort(near, kind="stable")
+        p = np.floor(self._camera.to_pixel(points[order])).astype(np.int64)
+        grey = (215 - 70 * near[order]).astype(np.uint8)
+        inside = (p[:, 1] >= 0) & (p[:, 1] < h) & (p[:, 0] >= 0) & (p[:, 0] < w)
+        rows, cols = p[inside, 1], p[inside, 0]
+        img.reshape(-1, 3)[rows * w + cols] = grey[inside, None]
+        return (int(rows.min()), int(rows.max()) + 1) if len(rows) else (0, 0)
 
     def _outlines(self, img: np.ndarray, walls: list[np.ndarray]) -> tuple[int, int]:
         """Draws each closed outline (world coordinates, m) in dark grey, 2 px wide; returns the rows it

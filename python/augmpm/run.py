@@ -204,6 +204,8 @@ class _Run:
         # (vtk/walls/walls.vtp).
         outlines = sim.wall_outlines()
         self.walls = any(moving for _, moving in outlines)
+        # 3D walls that move are drawn as their surface points in each frame.
+        self.walls_move_3d = sim.dim == 3 and any(getattr(w, "motion", None) is not None for w in sim.scene.walls)
         self.columns = METRIC_COLUMNS + wall_force_columns(len(sim.wall_impulse) - 1, sim.dim)
         # The walls' impulses at the last row, from which the next row's forces are measured.
         self.impulse_at = (sim.wall_impulse.copy(), sim.time)
@@ -224,8 +226,8 @@ class _Run:
             # a resumed run encodes it from the PNGs instead, as the earlier frames are not in memory.
             stream = out / f"animation.{animation}" if animation and not self.resumed else None
             outlines = [outline for outline, _ in sim.wall_outlines()]
-            # 3D: the walls drawn as points on them, half a cell apart.
-            surface = sim.wall_points(0.5 * sim.cell_size) if sim.dim == 3 else None
+            # 3D: the walls drawn as points on them, half a cell apart: once, or in every frame where some move.
+            surface = sim.wall_points(0.5 * sim.cell_size) if sim.dim == 3 and not self.walls_move_3d else None
             title = f"{scene.name} ({sim.method})"
             renderer = FrameRenderer(scene, title=title, animation=stream, outlines=outlines, surface=surface)
         self.renderer = renderer
@@ -285,6 +287,8 @@ class _Run:
         png = None
         if self.renderer is not None:
             moving = [outline for outline, moves in sim.wall_outlines() if moves]
+            if self.walls_move_3d:
+                moving = [sim.wall_points(0.5 * sim.cell_size)]
             png = self.renderer.draw(x, body, sim.time, out / "frames" / f"{name}.png", walls=moving)
         m = sim.metrics()
         row = {k: m[k] for k in METRIC_COLUMNS}

@@ -10,6 +10,7 @@
 use crate::geometry::{Region, Side, WallDistance, WallFeet, WallFoot};
 use crate::math::{Matrix, Real, Vector};
 use crate::mesh::TriangleMesh;
+use crate::motion::{Motion3, Pose3};
 use crate::wall::BoundaryPoint;
 use std::sync::Arc;
 
@@ -69,6 +70,33 @@ fn tangents(n: &P3) -> (P3, P3) {
 }
 
 impl Solid {
+    /// The solid's centre (m): a half-space's point, a mesh's bounding box's centre.
+    pub fn centre(&self) -> P3 {
+        match self {
+            Solid::HalfSpace { point, .. } => *point,
+            Solid::Box { centre, .. } | Solid::Sphere { centre, .. } | Solid::Cylinder { centre, .. } => *centre,
+            Solid::Mesh(mesh) => {
+                let (lo, hi) = mesh.bounds();
+                narrow(&((lo + hi) * 0.5))
+            }
+        }
+    }
+
+    /// A bound on the distance (m) of the solid's surface points from `p` (infinite for a half-space).
+    pub fn reach_from(&self, p: &P3) -> Real {
+        let away = (self.centre() - p).norm();
+        match self {
+            Solid::HalfSpace { .. } => Real::INFINITY,
+            Solid::Box { half, .. } => away + half.norm(),
+            Solid::Sphere { radius, .. } => away + radius,
+            Solid::Cylinder { radius, half_length, .. } => away + radius.hypot(*half_length),
+            Solid::Mesh(mesh) => {
+                let (lo, hi) = mesh.bounds();
+                away + ((hi - lo) * 0.5).norm() as Real
+            }
+        }
+    }
+
     /// Signed distance (m) to the surface, positive outside the solid, and the outward unit normal of
     /// the nearest surface point.
     pub fn signed_distance(&self, x: &P3) -> (Real, P3) {
@@ -296,24 +324,74 @@ impl Solid {
 }
 
 /// The material region of a 3D scene: inside the domain box and on the material side of every wall.
-/// Wall `i < walls.len()` is a scene wall; index `walls.len()` is the domain box.
+/// Wall `i < walls.len()` is a scene wall; index `walls.len()` is the domain box. A moving wall is its
+/// drawn solid placed by its pose ([`Motion3`]): distances, feet and boundary points are taken in the
+/// drawing's frame and placed.
 #[derive(Clone, Debug)]
 pub struct Walls3 {
     pub walls: Vec<Wall3>,
     domain: Solid,
     extent: P3,
+    /// Each wall's motion, if it moves.
+    moves: Vec<Option<Motion3>>,
+    /// Each wall's pose at the start and at the end of the step ([`Region::set_time`]).
+    now: Vec<Pose3>,
+    next: Vec<Pose3>,
+    dt: Real,
+    /// How far any wall point moved at the last [`Region::set_time`] (m).
+    sweep: Real,
+    /// The drawn walls' surface points at a spacing (m), sampled once: moving walls' points are placed.
+    drawn_points: std::sync::OnceLock<(Real, Vec<BoundaryPoint<3>>)>,
 }
 
 impl Walls3 {
     /// The walls of a domain box `[0, extent]`.
     pub fn new(walls: Vec<Wall3>, extent: P3) -> Self {
         let domain = Solid::Box { centre: extent * 0.5, half: extent * 0.5, axes: Matrix::<3>::identity() };
-        Self { walls, domain, extent }
+        let n = walls.len();
+        let (now, next) = (vec![Pose3::still(P3::zeros()); n], vec![Pose3::still(P3::zeros()); n]);
+        let moves = vec![None; n];
+        Self { walls, domain, extent, moves, now, next, dt: 0.0, sweep: 0.0, drawn_points: Default::default() }
+    }
+
+    /// The walls moving as `moves` says (one entry per wall), each about its motion's pivot or its
+    /// centre; a half-space cannot move (an error names the wall).
+    pub fn with_moves(mut self, moves: Vec<Option<Motion3>>) -> Result<Self, usize> {
+        if let Some(i) =
+            (0..moves.len()).find(|&i| moves[i].is_some() && matches!(self.walls[i].solid, Solid::HalfSpace { .. }))
+        {
+            return Err(i);
+        }
+        for (i, motion) in moves.iter().enumerate() {
+            if let Some(m) = motion {
+                let pose = m.pose(0.0, self.walls[i].solid.centre());
+                (self.now[i], self.next[i]) = (pose, pose);
+            }
+        }
+        self.moves = moves;
+        Ok(self)
     }
 
     /// Index of the domain box among the walls.
     pub fn box_index(&self) -> usize {
         self.walls.len()
+    }
+
+    /// The farthest distance (m) of wall `wall`'s points from its pivot.
+    fn reach(&self, wall: usize) -> Real {
+        self.walls[wall].solid.reach_from(&self.now[wall].pivot)
+    }
+
+    /// The fastest moving wall and the largest speed (m/s) of any of its points, if a wall moves.
+    pub fn fastest(&self) -> Option<(usize, Real)> {
+        (0..self.walls.len())
+            .filter_map(|i| self.moves[i].as_ref().map(|m| (i, m.top_speed(self.reach(i)))))
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+    }
+
+    /// The pose of moving wall `wall` now, or none for a still one.
+    fn pose(&self, wall: usize) -> Option<&Pose3> {
+        self.moves.get(wall).and_then(Option::as_ref).map(|_| &self.now[wall])
     }
 
     /// The signed distance of wall `wall`'s material side (positive in the wall) and its normal there.
@@ -324,12 +402,50 @@ impl Walls3 {
             } else {
                 (&self.walls[wall].solid, self.walls[wall].side)
             };
-            let (d, n) = solid.signed_distance(x);
+            let (d, n) = match self.pose(wall) {
+                Some(pose) => {
+                    let (d, n) = solid.signed_distance(&pose.unplace(x));
+                    (d, pose.turn(&n))
+                }
+                None => solid.signed_distance(x),
+            };
             match (solid, side) {
                 (Solid::HalfSpace { .. }, _) | (_, Side::Inside) => (d, n),
                 (_, Side::Outside) => (-d, -n),
             }
         }
+    }
+
+    /// Velocity (m/s) over the step of the point of wall `wall` at `x`: where its pose at the end of the
+    /// step puts it, less where it is, over the step.
+    fn velocity_at(&self, wall: usize, x: &P3) -> P3 {
+        match self.pose(wall) {
+            Some(now) if self.dt > 0.0 => (self.next[wall].place(&now.unplace(x)) - x) / self.dt,
+            _ => P3::zeros(),
+        }
+    }
+
+    /// The surface points of every wall as drawn (and of the domain box), at most `spacing` apart, with
+    /// their normals into the wall.
+    fn sample(&self, spacing: Real) -> Vec<BoundaryPoint<3>> {
+        let (lo, hi) = (P3::zeros(), self.extent);
+        let mut out = Vec::new();
+        for i in 0..=self.walls.len() {
+            let (solid, side) = if i == self.walls.len() {
+                (&self.domain, Side::Inside)
+            } else {
+                (&self.walls[i].solid, self.walls[i].side)
+            };
+            // Into the wall: out of a container, into an obstacle.
+            let into = match (solid, side) {
+                (Solid::HalfSpace { .. }, _) | (_, Side::Inside) => 1.0,
+                (_, Side::Outside) => -1.0,
+            };
+            for (x, [a, b, c]) in solid.surface(spacing, &lo, &hi) {
+                out.push(BoundaryPoint::with_normals(x, [a * into, b * into, c * into], i));
+            }
+        }
+        out
     }
 }
 
@@ -340,7 +456,8 @@ impl Walls3 {
     fn distance_bound(&self, i: usize, x: &P3) -> Option<Real> {
         match self.walls.get(i) {
             Some(Wall3 { solid: Solid::Mesh(mesh), side: Side::Outside }) => {
-                let away = mesh.bounds_distance(&wide(x));
+                let local = self.pose(i).map_or(*x, |pose| pose.unplace(x));
+                let away = mesh.bounds_distance(&wide(&local));
                 (away > 0.0).then_some(-away as Real)
             }
             _ => None,
@@ -382,15 +499,24 @@ impl Region<3> for Walls3 {
             } else {
                 (&self.walls[i].solid, self.walls[i].side)
             };
+            // A moving wall's feet are found in its drawing's frame and placed.
+            let pose = self.pose(i);
+            let x_drawn = pose.map_or(*x, |p| p.unplace(x));
             let mut add = |q: P3, normal: P3, curvature: Real| {
+                let (q, normal, normal_next) = match pose {
+                    Some(p) => (p.place(&q), p.turn(&normal), self.next[i].turn(&normal)),
+                    None => (q, normal, normal),
+                };
                 let distance = (x - q).norm();
                 // A face point counts only where it bounds the material region: on its own wall (up to
                 // rounding, far below the tolerance), within no other.
                 if distance < reach && self.distance_except(&q, Some(i)).distance <= tolerance {
-                    let foot = WallFoot { curvature, ..WallFoot::still(q, normal, i) };
+                    let velocity = self.velocity_at(i, &q);
+                    let foot = WallFoot { curvature, velocity, normal_next, ..WallFoot::still(q, normal, i) };
                     feet.push(foot, distance, tolerance);
                 }
             };
+            let x = &x_drawn;
             match (solid, side) {
                 (Solid::HalfSpace { .. }, _) => solid.face_feet(x, &mut add),
                 (Solid::Mesh(mesh), side) => {
@@ -417,28 +543,56 @@ impl Region<3> for Walls3 {
     }
 
     fn boundary_points(&self, spacing: Real) -> Vec<BoundaryPoint<3>> {
-        let (lo, hi) = (P3::zeros(), self.extent);
-        let mut out = Vec::new();
-        for i in 0..=self.walls.len() {
-            let (solid, side) = if i == self.walls.len() {
-                (&self.domain, Side::Inside)
-            } else {
-                (&self.walls[i].solid, self.walls[i].side)
-            };
-            // Into the wall: out of a container, into an obstacle.
-            let into = match (solid, side) {
-                (Solid::HalfSpace { .. }, _) | (_, Side::Inside) => 1.0,
-                (_, Side::Outside) => -1.0,
-            };
-            for (x, [a, b, c]) in solid.surface(spacing, &lo, &hi) {
-                out.push(BoundaryPoint::with_normals(x, [a * into, b * into, c * into], i));
+        let mut out = if self.moves() {
+            // Sampled once, as drawn; each step places the moving walls' points.
+            let (cached, drawn) = self.drawn_points.get_or_init(|| (spacing, self.sample(spacing)));
+            let mut out = if *cached == spacing { drawn.clone() } else { self.sample(spacing) };
+            for p in &mut out {
+                if let Some(pose) = self.pose(p.wall) {
+                    p.x = pose.place(&p.x);
+                    p.normals = p.normals.map(|n| pose.turn(&n));
+                    p.velocity = self.velocity_at(p.wall, &p.x);
+                }
             }
-        }
+            out
+        } else {
+            self.sample(spacing)
+        };
         // Only points on the boundary of the material region are kept (a container's wall beyond a
         // half-space, or the domain box inside a container, is not), up to the rounding of a point.
         let tolerance = (1e-9 * spacing).max(16.0 * Real::EPSILON * self.extent.max());
         out.retain(|p| self.distance(&p.x).distance.abs() <= tolerance);
         out
+    }
+
+    fn moves(&self) -> bool {
+        self.moves.iter().any(Option::is_some)
+    }
+
+    fn is_moving(&self, wall: usize) -> bool {
+        self.moves.get(wall).is_some_and(Option::is_some)
+    }
+
+    fn sweep(&self) -> Real {
+        self.sweep
+    }
+
+    fn set_time(&mut self, t: Real, dt: Real) {
+        self.dt = dt;
+        self.sweep = 0.0;
+        for i in 0..self.walls.len() {
+            if let Some(motion) = &self.moves[i] {
+                let centre = self.walls[i].solid.centre();
+                let before = self.now[i];
+                (self.now[i], self.next[i]) = (motion.pose(t, centre), motion.pose(t + dt, centre));
+                let reach = self.walls[i].solid.reach_from(&before.pivot);
+                self.sweep = self.sweep.max(before.distance_to(&self.now[i], reach));
+            }
+        }
+    }
+
+    fn surface_velocity(&self, wall: usize, x: &P3, _n: &P3) -> P3 {
+        self.velocity_at(wall, x)
     }
 
     fn num_walls(&self) -> usize {

@@ -153,6 +153,48 @@ impl WallPose {
     }
 }
 
+/// The factor `sin(2π f t + φ) − sin φ` of an oscillation's displacement and turn at time `t` (s).
+fn swing(t: Real, frequency: Real, phase: Real) -> Real {
+    (2.0 * crate::math::PI * frequency * t + phase).sin() - phase.sin()
+}
+
+/// Where time `t` (s) falls among increasing keyframe `times`: at keyframe `k` with weight 0 (before the
+/// first, after the last, or on one), or `u` of the way from keyframe `k` to `k + 1`.
+fn keyframe(times: &[Real], t: Real) -> (usize, Real) {
+    let last = times.len() - 1;
+    if t <= times[0] {
+        (0, 0.0)
+    } else if t >= times[last] {
+        (last, 0.0)
+    } else {
+        let k = times.partition_point(|&tk| tk <= t) - 1;
+        (k, (t - times[k]) / (times[k + 1] - times[k]))
+    }
+}
+
+/// The largest speed of a path through keyframes: `step(k)` is the distance from keyframe `k − 1` to `k`.
+fn keyframe_speed(times: &[Real], step: impl Fn(usize) -> Real) -> Real {
+    (1..times.len()).map(|k| step(k) / (times[k] - times[k - 1])).fold(0.0, Real::max)
+}
+
+/// Checks what the schema cannot: keyframes in increasing time, one position (and rotation) each.
+fn check_keyframes(
+    times: &[Real],
+    positions: usize,
+    turns: Option<(&'static str, usize)>,
+) -> Result<(), (&'static str, String)> {
+    if positions != times.len() {
+        return Err(("positions", format!("{positions} positions for {} times", times.len())));
+    }
+    if let Some((key, n)) = turns.filter(|&(_, n)| n != times.len()) {
+        return Err((key, format!("{n} {key} for {} times", times.len())));
+    }
+    if let Some(k) = (1..times.len()).find(|&k| times[k] <= times[k - 1]) {
+        return Err(("times", format!("times must increase: {} follows {}", times[k], times[k - 1])));
+    }
+    Ok(())
+}
+
 impl Motion {
     /// The pivot, if the scene gives one.
     pub fn pivot(&self) -> Option<[Real; 2]> {
@@ -171,20 +213,16 @@ impl Motion {
                 (Point::new(velocity[0], velocity[1]) * t, angular_velocity * t)
             }
             Motion::Oscillation { amplitude, angular_amplitude, frequency, phase, .. } => {
-                let s = (2.0 * crate::math::PI * frequency * t + phase).sin() - phase.sin();
+                let s = swing(t, *frequency, *phase);
                 (Point::new(amplitude[0], amplitude[1]) * s, angular_amplitude * s)
             }
             Motion::Keyframes { times, positions, angles, .. } => {
                 let angle_at = |k: usize| angles.as_ref().map_or(0.0, |a| a[k]);
                 let at = |k: usize| (Point::new(positions[k][0], positions[k][1]), angle_at(k));
-                let last = times.len() - 1;
-                if t <= times[0] {
-                    at(0)
-                } else if t >= times[last] {
-                    at(last)
+                let (k, u) = keyframe(times, t);
+                if u == 0.0 {
+                    at(k)
                 } else {
-                    let k = times.partition_point(|&tk| tk <= t) - 1;
-                    let u = (t - times[k]) / (times[k + 1] - times[k]);
                     let ((p0, a0), (p1, a1)) = (at(k), at(k + 1));
                     (p0 + (p1 - p0) * u, a0 + (a1 - a0) * u)
                 }
@@ -205,32 +243,201 @@ impl Motion {
                     * frequency
                     * (Point::new(amplitude[0], amplitude[1]).norm() + angular_amplitude.abs() * reach)
             }
-            Motion::Keyframes { times, positions, angles, .. } => (1..times.len())
-                .map(|k| {
-                    let dp = Point::new(positions[k][0] - positions[k - 1][0], positions[k][1] - positions[k - 1][1]);
-                    let da = angles.as_ref().map_or(0.0, |a| a[k] - a[k - 1]);
-                    (dp.norm() + da.abs() * reach) / (times[k] - times[k - 1])
-                })
-                .fold(0.0, Real::max),
+            Motion::Keyframes { times, positions, angles, .. } => keyframe_speed(times, |k| {
+                let dp = Point::new(positions[k][0] - positions[k - 1][0], positions[k][1] - positions[k - 1][1]);
+                let da = angles.as_ref().map_or(0.0, |a| a[k] - a[k - 1]);
+                dp.norm() + da.abs() * reach
+            }),
         }
     }
 
     /// Checks what the schema cannot: keyframes in increasing time, one position (and angle) each.
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
-        if let Motion::Keyframes { times, positions, angles, .. } = self {
-            if positions.len() != times.len() {
-                return Err(("positions", format!("{} positions for {} times", positions.len(), times.len())));
+        match self {
+            Motion::Keyframes { times, positions, angles, .. } => {
+                check_keyframes(times, positions.len(), angles.as_ref().map(|a| ("angles", a.len())))
             }
-            if let Some(a) = angles {
-                if a.len() != times.len() {
-                    return Err(("angles", format!("{} angles for {} times", a.len(), times.len())));
-                }
-            }
-            if let Some(k) = (1..times.len()).find(|&k| times[k] <= times[k - 1]) {
-                return Err(("times", format!("times must increase: {} follows {}", times[k], times[k - 1])));
+            _ => Ok(()),
+        }
+    }
+}
+
+type P3 = Vector<3>;
+
+/// How a 3D wall moves; the scene's drawing of the wall is its pose at time 0. A turn is a rotation
+/// vector: its direction the axis (right-handed), its length the angle (rad).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+pub enum Motion3 {
+    /// At a constant velocity and angular velocity (about the pivot, which moves with the wall).
+    #[schemars(title = "ConstantMotion3")]
+    Constant {
+        /// Velocity of the pivot.
+        #[serde(default)]
+        #[schemars(extend("unit" = "m/s", "unbounded" = true))]
+        velocity: [Real; 3],
+        /// Angular velocity: about its direction, at its length.
+        #[serde(default)]
+        #[schemars(extend("unit" = "rad/s", "unbounded" = true))]
+        angular_velocity: [Real; 3],
+        /// The point the wall turns about, where the scene draws it (default: the wall's centre).
+        #[serde(default)]
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
+        pivot: Option<[Real; 3]>,
+    },
+    /// Back and forth: displaced by `amplitude · (sin(2π f t + φ) − sin φ)` and turned by the rotation
+    /// vector `angular_amplitude · (sin(2π f t + φ) − sin φ)` about the pivot.
+    #[schemars(title = "OscillationMotion3")]
+    Oscillation {
+        /// Largest displacement of the pivot along each axis.
+        #[serde(default)]
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
+        amplitude: [Real; 3],
+        /// Largest turn about the pivot, as a rotation vector.
+        #[serde(default)]
+        #[schemars(extend("unit" = "rad", "unbounded" = true))]
+        angular_amplitude: [Real; 3],
+        /// Frequency f.
+        #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "Hz"))]
+        frequency: Real,
+        /// Phase φ at time 0.
+        #[serde(default)]
+        #[schemars(extend("unit" = "rad", "unbounded" = true))]
+        phase: Real,
+        /// The point the wall turns about, where the scene draws it (default: the wall's centre).
+        #[serde(default)]
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
+        pivot: Option<[Real; 3]>,
+    },
+    /// Along a path through keyframes, linearly between them (the rotation vectors too); held at the
+    /// first before it and at the last after it.
+    #[schemars(title = "KeyframeMotion3")]
+    Keyframes {
+        /// Times of the keyframes, increasing.
+        #[schemars(length(min = 1), extend("unit" = "s", "unbounded" = true))]
+        times: Vec<Real>,
+        /// Displacement of the pivot at each keyframe from where the scene draws it.
+        #[schemars(length(min = 1), extend("unit" = "m", "unbounded" = true))]
+        positions: Vec<[Real; 3]>,
+        /// Turn about the pivot at each keyframe, as a rotation vector (default: none).
+        #[serde(default)]
+        #[schemars(extend("unit" = "rad", "unbounded" = true))]
+        rotations: Option<Vec<[Real; 3]>>,
+        /// The point the wall turns about, where the scene draws it (default: the wall's centre).
+        #[serde(default)]
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
+        pivot: Option<[Real; 3]>,
+    },
+}
+
+/// Where a moving 3D wall is: displaced by `offset` and turned by `rotation` about `pivot` (m, where the
+/// scene draws it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pose3 {
+    pub pivot: P3,
+    pub offset: P3,
+    pub rotation: crate::math::Matrix<3>,
+}
+
+impl Pose3 {
+    /// The pose of a still wall.
+    pub fn still(pivot: P3) -> Self {
+        Self { pivot, offset: P3::zeros(), rotation: crate::math::Matrix::<3>::identity() }
+    }
+
+    /// The pose displaced by `offset` and turned by the rotation vector `turn` about `pivot`.
+    fn new(pivot: P3, offset: P3, turn: P3) -> Self {
+        Self { pivot, offset, rotation: nalgebra::Rotation3::new(turn).into_inner() }
+    }
+
+    /// Where the point `p` of the scene's drawing is in this pose.
+    pub fn place(&self, p: &P3) -> P3 {
+        self.pivot + self.offset + self.rotation * (p - self.pivot)
+    }
+
+    /// Where the point `x` (in this pose) is in the scene's drawing.
+    pub fn unplace(&self, x: &P3) -> P3 {
+        self.pivot + self.rotation.transpose() * (x - self.pivot - self.offset)
+    }
+
+    /// A direction (a normal) of the drawing turned into this pose.
+    pub fn turn(&self, n: &P3) -> P3 {
+        self.rotation * n
+    }
+
+    /// A bound on how far (m) a point at most `reach` (m) from the pivot moves from this pose to `other`
+    /// (with the same pivot): the pivot's move plus the angle between the turns times `reach`.
+    pub fn distance_to(&self, other: &Pose3, reach: Real) -> Real {
+        let relative = nalgebra::Rotation3::from_matrix_unchecked(other.rotation * self.rotation.transpose());
+        (other.offset - self.offset).norm() + relative.angle() * reach
+    }
+}
+
+impl Motion3 {
+    /// The pivot, if the scene gives one.
+    pub fn pivot(&self) -> Option<[Real; 3]> {
+        match self {
+            Motion3::Constant { pivot, .. } | Motion3::Oscillation { pivot, .. } | Motion3::Keyframes { pivot, .. } => {
+                *pivot
             }
         }
-        Ok(())
+    }
+
+    /// The pose at time `t` (s) of a wall whose centre is `centre` (the pivot unless one is given).
+    pub fn pose(&self, t: Real, centre: P3) -> Pose3 {
+        let pivot = self.pivot().map_or(centre, P3::from);
+        let (offset, turn) = match self {
+            Motion3::Constant { velocity, angular_velocity, .. } => {
+                (P3::from(*velocity) * t, P3::from(*angular_velocity) * t)
+            }
+            Motion3::Oscillation { amplitude, angular_amplitude, frequency, phase, .. } => {
+                let s = swing(t, *frequency, *phase);
+                (P3::from(*amplitude) * s, P3::from(*angular_amplitude) * s)
+            }
+            Motion3::Keyframes { times, positions, rotations, .. } => {
+                let at =
+                    |k: usize| (P3::from(positions[k]), rotations.as_ref().map_or(P3::zeros(), |r| P3::from(r[k])));
+                let (k, u) = keyframe(times, t);
+                if u == 0.0 {
+                    at(k)
+                } else {
+                    let ((p0, r0), (p1, r1)) = (at(k), at(k + 1));
+                    (p0 + (p1 - p0) * u, r0 + (r1 - r0) * u)
+                }
+            }
+        };
+        Pose3::new(pivot, offset, turn)
+    }
+
+    /// The largest speed (m/s) of a point at most `reach` (m) from the pivot: a bound the time step must
+    /// keep below a cell per step.
+    pub fn top_speed(&self, reach: Real) -> Real {
+        match self {
+            Motion3::Constant { velocity, angular_velocity, .. } => {
+                P3::from(*velocity).norm() + P3::from(*angular_velocity).norm() * reach
+            }
+            Motion3::Oscillation { amplitude, angular_amplitude, frequency, .. } => {
+                2.0 * crate::math::PI
+                    * frequency
+                    * (P3::from(*amplitude).norm() + P3::from(*angular_amplitude).norm() * reach)
+            }
+            // Between keyframes the rotation vector moves linearly; the angle turned is at most its change.
+            Motion3::Keyframes { times, positions, rotations, .. } => keyframe_speed(times, |k| {
+                let dp = P3::from(positions[k]) - P3::from(positions[k - 1]);
+                let dr = rotations.as_ref().map_or(0.0, |r| (P3::from(r[k]) - P3::from(r[k - 1])).norm());
+                dp.norm() + dr * reach
+            }),
+        }
+    }
+
+    /// Checks what the schema cannot: keyframes in increasing time, one position (and rotation) each.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        match self {
+            Motion3::Keyframes { times, positions, rotations, .. } => {
+                check_keyframes(times, positions.len(), rotations.as_ref().map(|r| ("rotations", r.len())))
+            }
+            _ => Ok(()),
+        }
     }
 }
 
@@ -279,5 +486,23 @@ mod tests {
         assert!((shake.pose(0.5, c).offset.x).abs() < 1e-12, "a whole period later it is back");
         let bad = Motion::Keyframes { times: vec![0.0, 0.0], positions: vec![[0.0; 2]; 2], angles: None, pivot: None };
         assert_eq!(bad.validate().unwrap_err().0, "times");
+    }
+
+    /// A 3D pose places a drawn point and takes it back; a quarter turn about z through the pivot (1, 0, 0)
+    /// takes (2, 0, 0) to (1, 1, 0); a constant motion turns at its angular velocity, and the bound on a
+    /// point's move is the pivot's move plus angle times reach.
+    #[test]
+    fn a_3d_pose_places_unplaces_and_turns() {
+        let half_pi = crate::math::PI / 2.0;
+        let pose = Pose3::new(P3::new(1.0, 0.0, 0.0), P3::new(0.5, 0.0, 0.0), P3::new(0.0, 0.0, half_pi));
+        let x = pose.place(&P3::new(2.0, 0.0, 0.0));
+        assert!((x - P3::new(1.5, 1.0, 0.0)).norm() < 1e-14);
+        assert!((pose.unplace(&x) - P3::new(2.0, 0.0, 0.0)).norm() < 1e-14);
+        let spin = Motion3::Constant { velocity: [0.0, 0.0, 1.0], angular_velocity: [0.0, 2.0, 0.0], pivot: None };
+        let (a, b) = (spin.pose(0.1, P3::zeros()), spin.pose(0.3, P3::zeros()));
+        assert!((a.distance_to(&b, 1.5) - (0.2 + 0.4 * 1.5)).abs() < 1e-12);
+        assert!((spin.top_speed(1.5) - (1.0 + 2.0 * 1.5)).abs() < 1e-12);
+        let bad = Motion3::Keyframes { times: vec![0.0, 1.0], positions: vec![[0.0; 3]], rotations: None, pivot: None };
+        assert_eq!(bad.validate().unwrap_err().0, "positions");
     }
 }

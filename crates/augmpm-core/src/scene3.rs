@@ -9,6 +9,7 @@ use crate::grid::GridLayout;
 use crate::material::{ConstitutiveModel, Material};
 use crate::math::{wide, Matrix, Precision, Real, Vector};
 use crate::mesh::TriangleMesh;
+use crate::motion::Motion3;
 use crate::particles::Particles;
 use crate::scene::{
     default_side, friction, inside, one, time_step, AugmentedSpec, MemoryEstimate, SceneError, Seeding, SideSpec,
@@ -74,6 +75,9 @@ pub enum Wall3Spec {
         #[serde(default, with = "friction::optional")]
         #[schemars(schema_with = "friction::optional_schema")]
         friction: Option<Real>,
+        /// How the wall moves (default: it stays).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        motion: Option<Motion3>,
     },
     /// A plane through `point`, the material on the side `normal` points to (a floor's normal points up).
     #[schemars(title = "PlaneWall")]
@@ -111,6 +115,9 @@ pub enum Wall3Spec {
         #[serde(default, with = "friction::optional")]
         #[schemars(schema_with = "friction::optional_schema")]
         friction: Option<Real>,
+        /// How the wall moves (default: it stays).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        motion: Option<Motion3>,
     },
     /// A capped cylinder, material `outside` it (an obstacle, the default) or `inside` it (a container).
     #[schemars(title = "CylinderWall")]
@@ -137,6 +144,9 @@ pub enum Wall3Spec {
         #[serde(default, with = "friction::optional")]
         #[schemars(schema_with = "friction::optional_schema")]
         friction: Option<Real>,
+        /// How the wall moves (default: it stays).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        motion: Option<Motion3>,
     },
     /// A closed triangle mesh, material `outside` it (an obstacle, the default) or `inside` it (a
     /// container).
@@ -154,6 +164,9 @@ pub enum Wall3Spec {
         #[serde(default, with = "friction::optional")]
         #[schemars(schema_with = "friction::optional_schema")]
         friction: Option<Real>,
+        /// How the wall moves (default: it stays).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        motion: Option<Motion3>,
     },
 }
 
@@ -277,6 +290,17 @@ impl Wall3Spec {
             Wall3Spec::Cylinder { radius, length, .. } => 2.0 * pi * radius * (length + radius),
             Wall3Spec::Plane { .. } => domain[0] * domain[1] + domain[1] * domain[2] + domain[2] * domain[0],
             Wall3Spec::Mesh { mesh, .. } => mesh.area(),
+        }
+    }
+
+    /// How the wall moves, if it does.
+    fn motion(&self) -> Option<&Motion3> {
+        match self {
+            Wall3Spec::Box { motion, .. }
+            | Wall3Spec::Sphere { motion, .. }
+            | Wall3Spec::Cylinder { motion, .. }
+            | Wall3Spec::Mesh { motion, .. } => motion.as_ref(),
+            Wall3Spec::Plane { .. } => None,
         }
     }
 
@@ -481,6 +505,9 @@ impl Scene3 {
                 }
                 Wall3Spec::Sphere { .. } => {}
             }
+            if let Some(motion) = wall.motion() {
+                motion.validate().map_err(|(k, reason)| SceneError::new(format!("{key}.motion.{k}"), reason))?;
+            }
             let (condition, friction) = wall.contact_keys();
             let condition = condition.unwrap_or(self.wall_condition);
             if friction.is_some_and(|mu| mu > 0.0) && condition != WallCondition::Separate {
@@ -583,10 +610,15 @@ impl Scene3 {
             };
             walls.push(wall);
             let (condition, friction) = w.contact_keys();
-            contacts.push(self.contact(condition.unwrap_or(self.wall_condition), friction));
+            let contact = self.contact(condition.unwrap_or(self.wall_condition), friction);
+            contacts.push(WallContact { moving: w.motion().is_some(), ..contact });
         }
         contacts.push(self.contact(self.wall_condition, None));
-        Ok((Walls3::new(walls, extent), contacts))
+        let moves = self.walls.iter().map(|w| w.motion().cloned()).collect();
+        let region = Walls3::new(walls, extent)
+            .with_moves(moves)
+            .map_err(|i| SceneError::new(format!("walls[{i}].motion"), "a plane cannot move; give a box instead"))?;
+        Ok((region, contacts))
     }
 
     /// How a wall of `condition` acts: its own friction, else the scene's (on separate walls).
@@ -691,6 +723,7 @@ impl Scene3 {
         }
         let (layout, region, boundary) = self.build_walls(method)?;
         let h = layout.h;
+        let fastest = region.fastest();
         let mut particles = Particles::<3>::default();
         for (b, body) in self.bodies.iter().enumerate() {
             let key = format!("bodies[{b}]");
@@ -717,7 +750,7 @@ impl Scene3 {
             wall_fraction: None,
             dt: 0.0,
         };
-        let (dt, warning) = time_step(&self.time, model.stable_dt(), None, h)?;
+        let (dt, warning) = time_step(&self.time, model.stable_dt(), fastest, h)?;
         model.dt = dt;
         Ok((Simulation::new(model, particles), warning.into_iter().collect()))
     }
