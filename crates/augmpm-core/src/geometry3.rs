@@ -43,6 +43,11 @@ pub enum Solid {
     },
     /// A closed triangle mesh, placed (held in f64 in either precision).
     Mesh(Arc<TriangleMesh>),
+    /// A thin wall: the points within `half` (m) of a mesh's triangles (open or closed).
+    Shell {
+        mesh: Arc<TriangleMesh>,
+        half: Real,
+    },
 }
 
 /// A vector in the mesh's double precision, and back.
@@ -75,7 +80,7 @@ impl Solid {
         match self {
             Solid::HalfSpace { point, .. } => *point,
             Solid::Box { centre, .. } | Solid::Sphere { centre, .. } | Solid::Cylinder { centre, .. } => *centre,
-            Solid::Mesh(mesh) => {
+            Solid::Mesh(mesh) | Solid::Shell { mesh, .. } => {
                 let (lo, hi) = mesh.bounds();
                 narrow(&((lo + hi) * 0.5))
             }
@@ -93,6 +98,10 @@ impl Solid {
             Solid::Mesh(mesh) => {
                 let (lo, hi) = mesh.bounds();
                 away + ((hi - lo) * 0.5).norm() as Real
+            }
+            Solid::Shell { mesh, half } => {
+                let (lo, hi) = mesh.bounds();
+                away + ((hi - lo) * 0.5).norm() as Real + half
             }
         }
     }
@@ -142,6 +151,10 @@ impl Solid {
             }
             Solid::Mesh(mesh) => {
                 let (d, n) = mesh.signed_distance(&wide(x));
+                (d as Real, narrow(&n))
+            }
+            Solid::Shell { mesh, half } => {
+                let (d, n) = mesh.shell_distance(&wide(x), crate::math::wide(*half));
                 (d as Real, narrow(&n))
             }
         }
@@ -272,6 +285,11 @@ impl Solid {
                     out.push((narrow(&x), normals.map(|n| narrow(&n))));
                 }
             }
+            Solid::Shell { mesh, half } => {
+                for (x, n) in mesh.shell_sample(crate::math::wide(spacing), crate::math::wide(*half)) {
+                    out.push((narrow(&x), [narrow(&n); 3]));
+                }
+            }
         }
         out
     }
@@ -317,8 +335,8 @@ impl Solid {
                     }
                 }
             }
-            // Its feet depend on the side the material is on: `Walls3::wall_feet`.
-            Solid::Mesh(_) => {}
+            // Their feet depend on the side the material is on: `Walls3::wall_feet`.
+            Solid::Mesh(_) | Solid::Shell { .. } => {}
         }
     }
 }
@@ -340,8 +358,9 @@ pub struct Walls3 {
     dt: Real,
     /// How far any wall point moved at the last [`Region::set_time`] (m).
     sweep: Real,
-    /// The drawn walls' surface points at a spacing (m), sampled once: moving walls' points are placed.
-    drawn_points: std::sync::OnceLock<(Real, Vec<BoundaryPoint<3>>)>,
+    /// The drawn walls' surface points at the spacings (m) asked for, each sampled once (the grid's, and
+    /// that of the frames): moving walls' points are placed.
+    drawn_points: std::sync::Arc<std::sync::Mutex<Vec<(Real, std::sync::Arc<Vec<BoundaryPoint<3>>>)>>>,
 }
 
 impl Walls3 {
@@ -357,6 +376,7 @@ impl Walls3 {
     /// The walls moving as `moves` says (one entry per wall), each about its motion's pivot or its
     /// centre; a half-space cannot move (an error names the wall).
     pub fn with_moves(mut self, moves: Vec<Option<Motion3>>) -> Result<Self, usize> {
+        assert_eq!(moves.len(), self.walls.len(), "one motion (or none) per wall");
         if let Some(i) =
             (0..moves.len()).find(|&i| moves[i].is_some() && matches!(self.walls[i].solid, Solid::HalfSpace { .. }))
         {
@@ -460,6 +480,11 @@ impl Walls3 {
                 let away = mesh.bounds_distance(&wide(&local));
                 (away > 0.0).then_some(-away as Real)
             }
+            Some(Wall3 { solid: Solid::Shell { mesh, half }, .. }) => {
+                let local = self.pose(i).map_or(*x, |pose| pose.unplace(x));
+                let away = mesh.bounds_distance(&wide(&local)) - crate::math::wide(*half);
+                (away > 0.0).then_some(-away as Real)
+            }
             _ => None,
         }
     }
@@ -469,7 +494,8 @@ impl Walls3 {
     /// asked (its nearest-triangle search is the dear part).
     fn distance_except(&self, x: &P3, skip: Option<usize>) -> WallDistance<3> {
         let mut best = WallDistance { distance: Real::NEG_INFINITY, normal: P3::zeros(), wall: self.box_index() };
-        let is_mesh = |i: usize| matches!(self.walls.get(i), Some(Wall3 { solid: Solid::Mesh(_), .. }));
+        let is_mesh =
+            |i: usize| matches!(self.walls.get(i), Some(Wall3 { solid: Solid::Mesh(_) | Solid::Shell { .. }, .. }));
         let all = || (0..=self.walls.len()).filter(|&i| Some(i) != skip);
         for i in all().filter(|&i| !is_mesh(i)).chain(all().filter(|&i| is_mesh(i))) {
             if self.distance_bound(i, x).is_some_and(|bound| bound < best.distance) {
@@ -523,6 +549,10 @@ impl Region<3> for Walls3 {
                     let into = if side == Side::Inside { 1.0 } else { -1.0 };
                     mesh.feet(&wide(x), crate::math::wide(reach), into, |q, n| add(narrow(&q), narrow(&n), 0.0));
                 }
+                (Solid::Shell { mesh, half }, _) => {
+                    let (reach, half) = (crate::math::wide(reach), crate::math::wide(*half));
+                    mesh.shell_feet(&wide(x), reach, half, |q, n| add(narrow(&q), narrow(&n), 0.0));
+                }
                 (_, Side::Inside) => {
                     solid.face_feet(x, &mut add);
                     // Escaped past an edge or a corner (beyond two or three faces' extents): the nearest
@@ -544,9 +574,19 @@ impl Region<3> for Walls3 {
 
     fn boundary_points(&self, spacing: Real) -> Vec<BoundaryPoint<3>> {
         let mut out = if self.moves() {
-            // Sampled once, as drawn; each step places the moving walls' points.
-            let (cached, drawn) = self.drawn_points.get_or_init(|| (spacing, self.sample(spacing)));
-            let mut out = if *cached == spacing { drawn.clone() } else { self.sample(spacing) };
+            // Sampled once per spacing, as drawn; each step places the moving walls' points.
+            let drawn = {
+                let mut cache = self.drawn_points.lock().unwrap_or_else(|e| e.into_inner());
+                match cache.iter().find(|(s, _)| *s == spacing) {
+                    Some((_, drawn)) => drawn.clone(),
+                    None => {
+                        let drawn = std::sync::Arc::new(self.sample(spacing));
+                        cache.push((spacing, drawn.clone()));
+                        drawn
+                    }
+                }
+            };
+            let mut out = (*drawn).clone();
             for p in &mut out {
                 if let Some(pose) = self.pose(p.wall) {
                     p.x = pose.place(&p.x);
@@ -586,7 +626,8 @@ impl Region<3> for Walls3 {
                 let before = self.now[i];
                 (self.now[i], self.next[i]) = (motion.pose(t, centre), motion.pose(t + dt, centre));
                 let reach = self.walls[i].solid.reach_from(&before.pivot);
-                self.sweep = self.sweep.max(before.distance_to(&self.now[i], reach));
+                let moved = before.distance_to(&self.now[i], reach);
+                self.sweep = if moved.is_nan() { Real::INFINITY } else { self.sweep.max(moved) };
             }
         }
     }
@@ -603,6 +644,7 @@ impl Region<3> for Walls3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::motion::Motion3;
     use nalgebra::{Rotation3, Unit};
 
     /// A few deterministic pseudo-random numbers in [0, 1).
@@ -715,5 +757,39 @@ mod tests {
         let feet = obstacle.wall_feet(&x, 0.05);
         let foot = feet.iter().next().expect("a foot");
         assert!((foot.x - edge).norm() < 1e-12 && (foot.normal + (x - edge).normalize()).norm() < 1e-12);
+    }
+
+    /// With meshes (a sphere mesh obstacle, a thin plate, one of them moving), the region's distance (meshes
+    /// last, skipped where their bounding box says they cannot win) is the largest of all walls' distances,
+    /// the first wall on a tie, at random points.
+    #[test]
+    fn skipping_meshes_by_their_boxes_changes_no_distance() {
+        use crate::mesh::shapes::icosphere;
+        let (v, t) = icosphere([0.4, 0.5, 0.5], 0.15, 2);
+        let ball = Arc::new(TriangleMesh::new(&v, &t, 0.5).expect("closed"));
+        let plate = [[0.6, 0.2, 0.2], [0.9, 0.3, 0.2], [0.9, 0.4, 0.8], [0.6, 0.3, 0.8]];
+        let plate = Arc::new(TriangleMesh::open(&plate, &[[0, 1, 2], [0, 2, 3]]).expect("open"));
+        let walls = vec![
+            Wall3 { solid: tilted_box(), side: Side::Inside },
+            Wall3 { solid: Solid::Mesh(ball), side: Side::Outside },
+            Wall3 { solid: Solid::Shell { mesh: plate, half: 0.04 }, side: Side::Outside },
+        ];
+        let spin = Motion3::Constant { velocity: [0.1, 0.0, 0.0], angular_velocity: [0.0, 1.0, 0.5], pivot: None };
+        let mut region =
+            Walls3::new(walls, P3::new(1.0, 1.0, 1.0)).with_moves(vec![None, Some(spin), None]).expect("moves");
+        region.set_time(0.3, 1e-3);
+        let r = uniform(3 * 3000);
+        for k in 0..3000 {
+            let x = P3::new(r[3 * k], r[3 * k + 1], r[3 * k + 2]);
+            let got = region.distance(&x);
+            let (mut best, mut wall) = (Real::NEG_INFINITY, usize::MAX);
+            for i in 0..=region.walls.len() {
+                let d = region.wall_distance(i)(&x).0;
+                if d > best {
+                    (best, wall) = (d, i);
+                }
+            }
+            assert!(got.distance == best && got.wall == wall, "{x}: {got:?} vs {best} at wall {wall}");
+        }
     }
 }

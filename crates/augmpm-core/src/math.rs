@@ -72,7 +72,13 @@ macro_rules! impl_dim_ops {
                     // Closed form for 3×3 (the hot path in 3D): an iterative decomposition per
                     // particle and Newton step costs more than the rest of the fit.
                     let a: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| wide(m[(i, j)])));
-                    min_sym3_eigenvalue(&a) as Real
+                    let closed = min_sym3_eigenvalue(&a) as Real;
+                    // Where the spread underflows (off-diagonal entries near the smallest normal), iterate.
+                    if closed.is_finite() {
+                        closed
+                    } else {
+                        m.symmetric_eigenvalues().min()
+                    }
                 }
             }
             #[inline]

@@ -85,16 +85,6 @@ enum Feature {
     Face,
 }
 
-fn barycentric(p: &V, [a, b, c]: [&V; 3]) -> [f64; 3] {
-    let (e0, e1, r) = (b - a, c - a, p - a);
-    let (d00, d01, d11) = (e0.dot(&e0), e0.dot(&e1), e1.dot(&e1));
-    let (d20, d21) = (r.dot(&e0), r.dot(&e1));
-    let det = d00 * d11 - d01 * d01;
-    let v = (d11 * d20 - d01 * d21) / det;
-    let w = (d00 * d21 - d01 * d20) / det;
-    [1.0 - v - w, v, w]
-}
-
 impl TriangleMesh {
     /// Checks and builds a mesh from its vertices (m) and triangles (indices into `vertices`,
     /// counter-clockwise seen from outside). Vertices at the same position are one vertex (an STL file
@@ -103,8 +93,26 @@ impl TriangleMesh {
     /// directions (an open or inconsistently oriented mesh), a negative volume (triangles facing in).
     /// Self-intersections are not looked for.
     pub fn new(vertices: &[[f64; 3]], triangles: &[[usize; 3]], crease_angle: f64) -> Result<Self, MeshError> {
-        if triangles.len() < 4 {
-            return refuse("triangles", format!("a closed mesh needs at least 4 triangles, got {}", triangles.len()));
+        Self::build(vertices, triangles, crease_angle, true)
+    }
+
+    /// A mesh of any triangles, open or closed, oriented or not (a thin wall's middle surface,
+    /// [`TriangleMesh::shell_distance`]): checked as [`TriangleMesh::new`] but for closedness, orientation
+    /// and volume.
+    pub fn open(vertices: &[[f64; 3]], triangles: &[[usize; 3]]) -> Result<Self, MeshError> {
+        Self::build(vertices, triangles, std::f64::consts::PI, false)
+    }
+
+    fn build(
+        vertices: &[[f64; 3]],
+        triangles: &[[usize; 3]],
+        crease_angle: f64,
+        closed: bool,
+    ) -> Result<Self, MeshError> {
+        let least = if closed { 4 } else { 1 };
+        if triangles.len() < least {
+            let what = if closed { "a closed mesh" } else { "a mesh" };
+            return refuse("triangles", format!("{what} needs at least {least} triangles, got {}", triangles.len()));
         }
         if let Some(i) = vertices.iter().position(|v| v.iter().any(|c| !c.is_finite())) {
             return refuse("vertices", format!("vertices[{i}] is not finite"));
@@ -139,48 +147,70 @@ impl TriangleMesh {
             }
             normals.push(n.normalize());
         }
-        // Each directed edge once, and its reverse once: closed and consistently oriented.
-        let mut edges: HashMap<(u32, u32), (u32, usize)> = HashMap::with_capacity(3 * tris.len());
-        for (t, tri) in tris.iter().enumerate() {
-            for k in 0..3 {
-                let e = (tri[k], tri[(k + 1) % 3]);
-                if let Some((other, _)) = edges.insert(e, (t as u32, k)) {
-                    return refuse(
-                        "triangles",
-                        format!(
-                            "triangles[{other}] and triangles[{t}] both run from vertex {} to {}: the mesh is not \
-                             consistently oriented, or more than two triangles meet at an edge",
-                            e.0, e.1
-                        ),
-                    );
+        // Closed: each directed edge once, and its reverse once (closed and consistently oriented). Open:
+        // triangles that share an edge are neighbours; a triangle is its own across an edge it alone has.
+        let mut neighbours: Vec<[u32; 3]> = (0..tris.len()).map(|t| [t as u32; 3]).collect();
+        let mut volume = 0.0;
+        if closed {
+            let mut edges: HashMap<(u32, u32), (u32, usize)> = HashMap::with_capacity(3 * tris.len());
+            for (t, tri) in tris.iter().enumerate() {
+                for k in 0..3 {
+                    let e = (tri[k], tri[(k + 1) % 3]);
+                    if let Some((other, _)) = edges.insert(e, (t as u32, k)) {
+                        return refuse(
+                            "triangles",
+                            format!(
+                                "triangles[{other}] and triangles[{t}] both run from vertex {} to {}: the mesh is \
+                                 not consistently oriented, or more than two triangles meet at an edge",
+                                e.0, e.1
+                            ),
+                        );
+                    }
                 }
             }
-        }
-        let mut neighbours = vec![[0u32; 3]; tris.len()];
-        for (&(a, b), &(t, k)) in &edges {
-            match edges.get(&(b, a)) {
-                Some(&(other, _)) => neighbours[t as usize][k] = other,
-                None => {
-                    return refuse(
-                        "triangles",
-                        format!("the mesh is not closed: the edge from vertex {a} to {b} borders triangles[{t}] only"),
-                    )
+            for (t, tri) in tris.iter().enumerate() {
+                for k in 0..3 {
+                    let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                    match edges.get(&(b, a)) {
+                        Some(&(other, _)) => neighbours[t][k] = other,
+                        None => {
+                            return refuse(
+                                "triangles",
+                                format!(
+                                "the mesh is not closed: the edge from vertex {a} to {b} borders triangles[{t}] only"
+                            ),
+                            )
+                        }
+                    }
                 }
             }
-        }
-        let volume: f64 = tris
-            .iter()
-            .map(|t| points[t[0] as usize].dot(&points[t[1] as usize].cross(&points[t[2] as usize])))
-            .sum::<f64>()
-            / 6.0;
-        if volume <= 0.0 {
-            return refuse(
-                "triangles",
-                format!(
-                    "the triangles face inward (the enclosed volume is {volume:e} m³): list each triangle's \
-                     vertices counter-clockwise seen from outside"
-                ),
-            );
+            volume = tris
+                .iter()
+                .map(|t| points[t[0] as usize].dot(&points[t[1] as usize].cross(&points[t[2] as usize])))
+                .sum::<f64>()
+                / 6.0;
+            if volume <= 0.0 {
+                return refuse(
+                    "triangles",
+                    format!(
+                        "the triangles face inward (the enclosed volume is {volume:e} m³): list each triangle's \
+                         vertices counter-clockwise seen from outside"
+                    ),
+                );
+            }
+        } else {
+            let mut edges: HashMap<(u32, u32), Vec<(u32, usize)>> = HashMap::with_capacity(3 * tris.len());
+            for (t, tri) in tris.iter().enumerate() {
+                for k in 0..3 {
+                    let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                    edges.entry((a.min(b), a.max(b))).or_default().push((t as u32, k));
+                }
+            }
+            for sharing in edges.values().filter(|s| s.len() == 2) {
+                let ((t0, k0), (t1, k1)) = (sharing[0], sharing[1]);
+                neighbours[t0 as usize][k0] = t1;
+                neighbours[t1 as usize][k1] = t0;
+            }
         }
         let area = tris
             .iter()
@@ -252,35 +282,33 @@ impl TriangleMesh {
         self.triangles[t].map(|i| &self.vertices[i as usize])
     }
 
-    /// The feature of triangle `t` that its point `q` lies on, up to rounding.
-    fn feature(&self, t: usize, q: &V) -> Feature {
-        let b = barycentric(q, self.corners(t));
-        let eps = 1e-9;
-        let zeros: Vec<usize> = (0..3).filter(|&k| b[k] <= eps).collect();
-        match zeros.as_slice() {
-            [_, _] => Feature::Vertex((0..3).find(|k| !zeros.contains(k)).unwrap_or(0)),
-            // Zero opposite vertex k: the edge from k + 1 to k + 2.
-            [k] => Feature::Edge((k + 1) % 3),
+    /// The feature of a triangle that parry's projection landed on (its edge `k` runs from vertex `k` to
+    /// `k + 1`; parry's edges are AB, BC, AC, the same three).
+    fn feature(location: &TrianglePointLocation) -> Feature {
+        match location {
+            TrianglePointLocation::OnVertex(k) => Feature::Vertex(*k as usize),
+            TrianglePointLocation::OnEdge(k, _) => Feature::Edge(*k as usize),
             _ => Feature::Face,
         }
     }
 
-    /// The nearest point of the surface to `x` and the triangle it lies on.
-    fn nearest(&self, x: &V) -> (V, usize) {
-        let (proj, (t, _)) = self.tree.project_local_point_and_get_location(&Point3::from(*x), false);
-        (proj.point.coords, t as usize)
+    /// The nearest point of the surface to `x`, the triangle it lies on and where on it.
+    fn nearest(&self, x: &V) -> (V, usize, TrianglePointLocation) {
+        let (proj, (t, location)) = self.tree.project_local_point_and_get_location(&Point3::from(*x), false);
+        (proj.point.coords, t as usize, location)
     }
 
     /// Signed distance (m) to the surface, positive outside, and the outward unit normal: the distance's
     /// gradient, or on the surface the pseudo-normal there.
     pub fn signed_distance(&self, x: &V) -> (f64, V) {
-        let (q, t) = self.nearest(x);
-        self.signed_from(x, &q, t)
+        let (q, t, location) = self.nearest(x);
+        self.signed_from(x, &q, t, &location)
     }
 
-    /// The signed distance and outward normal at `x` from its nearest surface point `q`, on triangle `t`.
-    fn signed_from(&self, x: &V, q: &V, t: usize) -> (f64, V) {
-        let pseudo = match self.feature(t, q) {
+    /// The signed distance and outward normal at `x` from its nearest surface point `q`, on triangle `t` at
+    /// `location`.
+    fn signed_from(&self, x: &V, q: &V, t: usize, location: &TrianglePointLocation) -> (f64, V) {
+        let pseudo = match Self::feature(location) {
             Feature::Vertex(k) => self.vertex_normals[self.triangles[t][k] as usize],
             Feature::Edge(k) => self.edge_normals[t][k],
             Feature::Face => self.normals[t],
@@ -296,8 +324,8 @@ impl TriangleMesh {
     }
 
     /// The feet of `x` on the surface within `reach` (m): the nearest point, and the perpendiculars that
-    /// land inside a face facing `x`; of feet whose normals differ by less than the crease angle (one
-    /// smooth patch) only the nearest. `into` is +1 where the wall lies outside the mesh (a container),
+    /// land on a face facing `x` (inside it, or on a seam); of feet whose normals differ by less than the crease angle (one
+    /// direction) only the nearest. `into` is +1 where the wall lies outside the mesh (a container),
     /// −1 where it lies inside (an obstacle); `add` gets each foot and its normal into the wall. One pass
     /// over the triangles whose boxes lie within `reach` finds both.
     pub fn feet(&self, x: &V, reach: f64, into: f64, mut add: impl FnMut(V, V)) {
@@ -320,7 +348,7 @@ impl TriangleMesh {
         let tolerance = f64::EPSILON.sqrt() * reach;
         let point = Point3::from(*x);
         let aabb = Aabb::new(Point3::from(x - V::repeat(reach)), Point3::from(x + V::repeat(reach)));
-        let mut nearest: Option<(f64, V, usize)> = None;
+        let mut nearest: Option<(f64, V, usize, TrianglePointLocation)> = None;
         for t in self.tree.bvh().intersect_aabb(&aabb) {
             let (projection, location) = self.tree.triangle(t).project_local_point_and_get_location(&point, false);
             let (q, t) = (projection.point.coords, t as usize);
@@ -328,17 +356,20 @@ impl TriangleMesh {
             if distance >= reach {
                 continue;
             }
-            if nearest.is_none_or(|(best, ..)| distance < best) {
-                nearest = Some((distance, q, t));
-            }
-            // Facing: the face lies ahead of x along its normal into the wall.
+            // Facing: the face lies ahead of x along its normal into the wall; its perpendicular lands on it
+            // (inside, or on an edge shared with a face in the same plane, a seam).
             let normal = self.normals[t] * into;
-            if matches!(location, TrianglePointLocation::OnFace(..)) && (q - x).dot(&normal) >= -tolerance {
+            let perpendicular = matches!(location, TrianglePointLocation::OnFace(..))
+                || (x - q).cross(&self.normals[t]).norm() <= 1e-9 * distance;
+            if perpendicular && (q - x).dot(&normal) >= -tolerance {
                 offer(q, normal, distance);
             }
+            if nearest.as_ref().is_none_or(|(best, ..)| distance < *best) {
+                nearest = Some((distance, q, t, location));
+            }
         }
-        if let Some((distance, q, t)) = nearest {
-            let (_, n) = self.signed_from(x, &q, t);
+        if let Some((distance, q, t, location)) = nearest {
+            let (_, n) = self.signed_from(x, &q, t, &location);
             offer(q, n * into, distance);
         }
         let found = &mut found[..len];
@@ -352,6 +383,28 @@ impl TriangleMesh {
                 add(q, n);
             }
         }
+    }
+
+    /// How many candidate points [`TriangleMesh::sample`] (or, with `half` (m), the thin wall's
+    /// [`TriangleMesh::shell_sample`]) tries at `spacing` (m): what its memory and time scale with.
+    pub fn sample_candidates(&self, spacing: f64, half: Option<f64>) -> f64 {
+        let fine = spacing / 4.0;
+        (0..self.triangles.len())
+            .map(|t| {
+                let [a, b, c] = self.corners(t);
+                match half {
+                    None => {
+                        let longest = [(b - a).norm(), (c - b).norm(), (a - c).norm()].into_iter().fold(0.0, f64::max);
+                        let m = (longest / fine).ceil() + 1.0;
+                        0.5 * m * (m + 1.0)
+                    }
+                    Some(half) => {
+                        let extent = a.sup(b).sup(c) - a.inf(b).inf(c) + V::repeat(2.0 * (half + 2.0 * fine));
+                        (extent / fine).map(|e| e + 1.0).product()
+                    }
+                }
+            })
+            .sum()
     }
 
     /// Points on the surface at most `spacing` (m) apart with their outward normals (up to three, as
@@ -443,6 +496,133 @@ impl TriangleMesh {
             if !taken {
                 grid.entry((c.x, c.y, c.z)).or_default().push(kept.len());
                 kept.push((x, normals));
+            }
+        }
+        kept
+    }
+}
+
+/// A thin wall: the points within `half` (m) of a mesh's triangles (open or closed, any orientation).
+impl TriangleMesh {
+    /// Signed distance (m) to the surface of the thin wall around the mesh, positive outside it, and its
+    /// outward normal: away from the nearest point of the middle surface (its face's normal there, on it).
+    pub fn shell_distance(&self, x: &V, half: f64) -> (f64, V) {
+        let (q, t, _) = self.nearest(x);
+        let r = x - q;
+        let d = r.norm();
+        let n = if d > 1e-12 * self.size { r / d } else { self.normals[t] };
+        (d - half, n)
+    }
+
+    /// The feet of `x` on the thin wall's surface within `reach` (m), with normals into the wall: the
+    /// nearest point, and the perpendiculars to the faces within reach whose foot lands inside them,
+    /// offset by `half` towards `x`; of feet whose normals differ by less than the crease angle of a closed
+    /// mesh (here 30°) only the nearest.
+    pub fn shell_feet(&self, x: &V, reach: f64, half: f64, mut add: impl FnMut(V, V)) {
+        if self.bounds_distance(x) >= reach + half {
+            return;
+        }
+        const MOST: usize = 16;
+        let mut found = [(V::zeros(), V::zeros(), f64::INFINITY); MOST];
+        let mut len = 0;
+        let mut offer = |q: V, n: V, d: f64| {
+            if len < MOST {
+                found[len] = (q, n, d);
+                len += 1;
+            } else if let Some(far) = (0..MOST).max_by(|&a, &b| found[a].2.total_cmp(&found[b].2)) {
+                if found[far].2 > d {
+                    found[far] = (q, n, d);
+                }
+            }
+        };
+        let point = Point3::from(*x);
+        let around = reach + half;
+        let aabb = Aabb::new(Point3::from(x - V::repeat(around)), Point3::from(x + V::repeat(around)));
+        let mut nearest: Option<(f64, V, usize)> = None;
+        for t in self.tree.bvh().intersect_aabb(&aabb) {
+            let (projection, location) = self.tree.triangle(t).project_local_point_and_get_location(&point, false);
+            let (q, t) = (projection.point.coords, t as usize);
+            let distance = (x - q).norm();
+            if distance - half >= reach {
+                continue;
+            }
+            if nearest.is_none_or(|(best, ..)| distance < best) {
+                nearest = Some((distance, q, t));
+            }
+            if matches!(location, TrianglePointLocation::OnFace(..)) && distance > 0.0 {
+                let side = if (x - q).dot(&self.normals[t]) >= 0.0 { 1.0 } else { -1.0 };
+                let out = self.normals[t] * side;
+                offer(q + out * half, -out, (distance - half).abs());
+            }
+        }
+        if let Some((distance, q, t)) = nearest {
+            let out = if distance > 1e-12 * self.size { (x - q) / distance } else { self.normals[t] };
+            offer(q + out * half, -out, (distance - half).abs());
+        }
+        let found = &mut found[..len];
+        found.sort_by(|a, b| a.2.total_cmp(&b.2));
+        let crease = (std::f64::consts::PI / 6.0).cos();
+        let mut kept: [V; MOST] = [V::zeros(); MOST];
+        let mut count = 0;
+        for &(q, n, _) in found.iter() {
+            if kept[..count].iter().all(|m| m.dot(&n) < crease) {
+                kept[count] = n;
+                count += 1;
+                add(q, n);
+            }
+        }
+    }
+
+    /// Points on the thin wall's surface at most `spacing` (m) apart, with their outward normals: the points
+    /// of a lattice `spacing/4` fine near each triangle (within `half` and two lattice steps of it), each
+    /// moved along the way from its nearest middle-surface point to `half` from it, kept where no other face
+    /// is nearer (on the surface, not inside the wall), then thinned by Poisson-disk elimination at 0.7
+    /// spacing; the sheets on either side, the rims along open edges and the round caps at corners are
+    /// sampled alike.
+    pub fn shell_sample(&self, spacing: f64, half: f64) -> Vec<(V, V)> {
+        let fine = spacing / 4.0;
+        let margin = V::repeat(half + 2.0 * fine);
+        let mut seen = std::collections::HashSet::new();
+        let mut candidates = Vec::new();
+        for t in 0..self.triangles.len() {
+            let [a, b, c] = self.corners(t);
+            let lo = ((a.inf(b).inf(c) - margin) / fine).map(|v| v.floor() as i64);
+            let hi = ((a.sup(b).sup(c) + margin) / fine).map(|v| v.ceil() as i64);
+            for i in lo.x..=hi.x {
+                for j in lo.y..=hi.y {
+                    for k in lo.z..=hi.z {
+                        if !seen.insert((i, j, k)) {
+                            continue;
+                        }
+                        let p = V::new(i as f64, j as f64, k as f64) * fine;
+                        let (q, t, _) = self.nearest(&p);
+                        let d = (p - q).norm();
+                        if (d - half).abs() > fine {
+                            continue;
+                        }
+                        let out = if d > 1e-12 * self.size { (p - q) / d } else { self.normals[t] };
+                        let on = q + out * half;
+                        if (self.nearest(&on).0 - on).norm() >= half * (1.0 - 1e-9) {
+                            candidates.push((on, out));
+                        }
+                    }
+                }
+            }
+        }
+        let radius = 0.7 * spacing;
+        let cell = |x: &V| (x / radius).map(|c| c.floor() as i64);
+        let mut grid: HashMap<(i64, i64, i64), Vec<usize>> = HashMap::new();
+        let mut kept: Vec<(V, V)> = Vec::new();
+        for (x, n) in candidates {
+            let c = cell(&x);
+            let near =
+                (-1..=1).flat_map(|i| (-1..=1).flat_map(move |j| (-1..=1).map(move |k| (c.x + i, c.y + j, c.z + k))));
+            let taken = near
+                .into_iter()
+                .any(|key| grid.get(&key).is_some_and(|list| list.iter().any(|&p| (kept[p].0 - x).norm() < radius)));
+            if !taken {
+                grid.entry((c.x, c.y, c.z)).or_default().push(kept.len());
+                kept.push((x, n));
             }
         }
         kept
@@ -641,5 +821,56 @@ mod tests {
         sphere.feet(&V::new(0.5, 0.5, 0.82), 0.1, -1.0, |q, n| feet.push((q, n)));
         assert_eq!(feet.len(), 1);
         assert!((feet[0].1 + V::z()).norm() < 0.1, "into the obstacle: {:?}", feet[0].1);
+    }
+
+    /// A thin wall around an open square plate turned in no coordinate plane: its distance is the distance
+    /// to the plate less the half thickness; its samples lie on its surface (both sheets, rims and corners),
+    /// cover it at the spacing and are at least 0.7 spacing apart; the feet of a point above the plate's
+    /// middle are one, on the upper sheet, facing down into the wall.
+    #[test]
+    fn a_thin_wall_around_an_open_plate() {
+        let r = nalgebra::Rotation3::from_euler_angles(0.3, -0.5, 0.2);
+        let centre = V::new(0.5, 0.5, 0.5);
+        let corner = |u: f64, v: f64| -> [f64; 3] { (centre + r * V::new(u, 0.0, v)).into() };
+        let v = vec![corner(-0.2, -0.2), corner(0.2, -0.2), corner(0.2, 0.2), corner(-0.2, 0.2)];
+        let plate = TriangleMesh::open(&v, &[[0, 1, 2], [0, 2, 3]]).expect("an open plate");
+        let half = 0.03;
+        let exact = |x: &V| {
+            let l = r.inverse() * (x - centre);
+            let (du, dv) = ((l.x.abs() - 0.2).max(0.0), (l.z.abs() - 0.2).max(0.0));
+            (du * du + l.y * l.y + dv * dv).sqrt() - half
+        };
+        let rnd = uniform(3 * 2000);
+        for k in 0..2000 {
+            let x = V::new(rnd[3 * k], rnd[3 * k + 1], rnd[3 * k + 2]);
+            assert!((plate.shell_distance(&x, half).0 - exact(&x)).abs() < 1e-12);
+        }
+        let spacing = 0.02;
+        let points = plate.shell_sample(spacing, half);
+        for (x, n) in &points {
+            assert!(exact(x).abs() < 1e-12 && (n.norm() - 1.0).abs() < 1e-12);
+        }
+        for (i, (x, _)) in points.iter().enumerate() {
+            let nearest = points
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .map(|(_, p)| (p.0 - x).norm())
+                .fold(f64::INFINITY, f64::min);
+            assert!(nearest >= 0.7 * spacing - 1e-12, "two points {nearest} apart");
+        }
+        for k in 0..2000 {
+            let x = V::new(rnd[3 * k], rnd[3 * k + 1], rnd[3 * k + 2]);
+            let (d, n) = plate.shell_distance(&x, half);
+            let on = x - n * d;
+            let nearest = points.iter().map(|p| (p.0 - on).norm()).fold(f64::INFINITY, f64::min);
+            assert!(nearest <= spacing, "{on} is {} spacings from a point", nearest / spacing);
+        }
+        let above = centre + r * V::new(0.05, 0.04, -0.03);
+        let mut feet = Vec::new();
+        plate.shell_feet(&above, 0.05, half, |q, n| feet.push((q, n)));
+        assert_eq!(feet.len(), 1);
+        assert!((feet[0].0 - (centre + r * V::new(0.05, half, -0.03))).norm() < 1e-12);
+        assert!((feet[0].1 + r * V::y()).norm() < 1e-12);
     }
 }

@@ -366,10 +366,10 @@ impl Pose3 {
     }
 
     /// A bound on how far (m) a point at most `reach` (m) from the pivot moves from this pose to `other`
-    /// (with the same pivot): the pivot's move plus the angle between the turns times `reach`.
+    /// (with the same pivot): the pivot's move plus ‖R₂ − R₁‖ `reach` (the Frobenius norm bounds the
+    /// turn's effect on any point at `reach`, without the rounding of an angle near zero).
     pub fn distance_to(&self, other: &Pose3, reach: Real) -> Real {
-        let relative = nalgebra::Rotation3::from_matrix_unchecked(other.rotation * self.rotation.transpose());
-        (other.offset - self.offset).norm() + relative.angle() * reach
+        (other.offset - self.offset).norm() + (other.rotation - self.rotation).norm() * reach
     }
 }
 
@@ -500,7 +500,9 @@ mod tests {
         assert!((pose.unplace(&x) - P3::new(2.0, 0.0, 0.0)).norm() < 1e-14);
         let spin = Motion3::Constant { velocity: [0.0, 0.0, 1.0], angular_velocity: [0.0, 2.0, 0.0], pivot: None };
         let (a, b) = (spin.pose(0.1, P3::zeros()), spin.pose(0.3, P3::zeros()));
-        assert!((a.distance_to(&b, 1.5) - (0.2 + 0.4 * 1.5)).abs() < 1e-12);
+        // Turned by 0.4 rad about y: ‖R₂ − R₁‖ = 2√2 sin(0.2), at least the chord 2 sin(0.2) of a point at 1.
+        let chord = 2.0 * (0.2 as Real).sin();
+        assert!((a.distance_to(&b, 1.5) - (0.2 + 2.0_f64.sqrt() * chord * 1.5)).abs() < 1e-12);
         assert!((spin.top_speed(1.5) - (1.0 + 2.0 * 1.5)).abs() < 1e-12);
         let bad = Motion3::Keyframes { times: vec![0.0, 1.0], positions: vec![[0.0; 3]], rotations: None, pivot: None };
         assert_eq!(bad.validate().unwrap_err().0, "positions");

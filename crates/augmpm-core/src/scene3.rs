@@ -154,6 +154,12 @@ pub enum Wall3Spec {
     Mesh {
         #[serde(flatten)]
         mesh: MeshSource,
+        /// A thin wall of this thickness instead of a solid: the points within thickness/2 of the
+        /// triangles, which may then be open and oriented either way (material all around it; at least
+        /// about 3 cells keeps the material on one side out of the MLS systems of the other).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "m"))]
+        thickness: Option<Real>,
         /// Where the material is: `outside` the mesh (an obstacle) or `inside` (a container).
         #[serde(default = "default_side")]
         side: SideSpec,
@@ -212,6 +218,20 @@ pub struct MeshSource {
 }
 
 impl MeshSource {
+    /// An error naming `key` unless the mesh has vertices and triangles.
+    fn require(&self, key: &str) -> Result<(), SceneError> {
+        if !self.vertices.is_empty() && !self.triangles.is_empty() {
+            return Ok(());
+        }
+        Err(match &self.file {
+            Some(_) => SceneError::new(
+                format!("{key}.file"),
+                "mesh files are read by the Python package (augmpm); the engine takes vertices and triangles",
+            ),
+            None => SceneError::new(key, "give a mesh file, or vertices and triangles"),
+        })
+    }
+
     /// The vertices placed in the scene (m).
     fn placed(&self) -> Vec<[f64; 3]> {
         let axis = nalgebra::Vector3::from_iterator(self.axis.iter().map(|&c| wide(c)));
@@ -227,16 +247,16 @@ impl MeshSource {
 
     /// The checked mesh, placed; an error names `key`'s entry.
     fn build(&self, key: &str) -> Result<std::sync::Arc<TriangleMesh>, SceneError> {
-        if self.vertices.is_empty() || self.triangles.is_empty() {
-            return Err(match &self.file {
-                Some(_) => SceneError::new(
-                    format!("{key}.file"),
-                    "mesh files are read by the Python package (augmpm); the engine takes vertices and triangles",
-                ),
-                None => SceneError::new(key, "give a mesh file, or vertices and triangles"),
-            });
-        }
+        self.require(key)?;
         TriangleMesh::new(&self.placed(), &self.triangles, wide(self.crease_angle))
+            .map(std::sync::Arc::new)
+            .map_err(|e| SceneError::new(format!("{key}.{}", e.key), e.reason))
+    }
+
+    /// The placed mesh as the middle surface of a thin wall: open or closed, oriented either way.
+    fn build_open(&self, key: &str) -> Result<std::sync::Arc<TriangleMesh>, SceneError> {
+        self.require(key)?;
+        TriangleMesh::open(&self.placed(), &self.triangles)
             .map(std::sync::Arc::new)
             .map_err(|e| SceneError::new(format!("{key}.{}", e.key), e.reason))
     }
@@ -289,6 +309,7 @@ impl Wall3Spec {
             Wall3Spec::Sphere { radius, .. } => 4.0 * pi * radius * radius,
             Wall3Spec::Cylinder { radius, length, .. } => 2.0 * pi * radius * (length + radius),
             Wall3Spec::Plane { .. } => domain[0] * domain[1] + domain[1] * domain[2] + domain[2] * domain[0],
+            Wall3Spec::Mesh { mesh, thickness: Some(_), .. } => 2.0 * mesh.area(),
             Wall3Spec::Mesh { mesh, .. } => mesh.area(),
         }
     }
@@ -606,6 +627,16 @@ impl Scene3 {
                         Solid::Cylinder { centre: p3(center), axis, radius: *radius, half_length: 0.5 * length };
                     Wall3 { solid, side: side(s) }
                 }
+                Wall3Spec::Mesh { mesh, thickness: Some(thickness), side: s, .. } => {
+                    if *s == SideSpec::Inside {
+                        return Err(SceneError::new(
+                            format!("{key}.side"),
+                            "a thin wall (thickness) has material all around it; leave side out",
+                        ));
+                    }
+                    let solid = Solid::Shell { mesh: mesh.build_open(&key)?, half: 0.5 * thickness };
+                    Wall3 { solid, side: Side::Outside }
+                }
                 Wall3Spec::Mesh { mesh, side: s, .. } => Wall3 { solid: Solid::Mesh(mesh.build(&key)?), side: side(s) },
             };
             walls.push(wall);
@@ -695,6 +726,23 @@ impl Scene3 {
                 "augmented.spacing",
                 format!("the walls would be sampled with about {points:.3e} points (at most {MAX_BOUNDARY_POINTS:e}); raise the spacing or lower grid.resolution"),
             ));
+        }
+        if method == Method::Augmented {
+            // A mesh is sampled from candidates a quarter spacing apart along its triangles' longest edges.
+            let spacing = wide(self.augmented.spacing * h);
+            for (i, wall) in region.walls.iter().enumerate() {
+                let candidates = match &wall.solid {
+                    Solid::Mesh(mesh) => mesh.sample_candidates(spacing, None),
+                    Solid::Shell { mesh, half } => mesh.sample_candidates(spacing, Some(wide(*half))),
+                    _ => 0.0,
+                };
+                if candidates.is_nan() || candidates > MAX_BOUNDARY_POINTS as f64 {
+                    return Err(SceneError::new(
+                        format!("walls[{i}]"),
+                        format!("sampling this mesh at the augmented grid's spacing would try about {candidates:.3e} points (at most {MAX_BOUNDARY_POINTS:e}); split its long triangles, or raise augmented.spacing"),
+                    ));
+                }
+            }
         }
         let boundary = match method {
             Method::Naive => Boundary::Naive(NaiveBoundary::new(&layout, &region, contacts)),
@@ -801,11 +849,7 @@ fn seed_body(
     // The bounding box of the solid: its distance along each axis from far away.
     let reach = |dir: P3| {
         let far = 1e3 * (1.0 + volume.cbrt());
-        let probe = match &solid {
-            Solid::Box { centre, .. } | Solid::Sphere { centre, .. } | Solid::Cylinder { centre, .. } => *centre,
-            Solid::HalfSpace { point, .. } => *point,
-            Solid::Mesh(_) => unreachable!("a mesh body takes its bounding box"),
-        };
+        let probe = solid.centre();
         probe + dir * (far - solid.signed_distance(&(probe + dir * far)).0)
     };
     let (lo, hi) = match &solid {

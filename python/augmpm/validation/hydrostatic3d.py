@@ -72,7 +72,7 @@ def run(quick: bool, angles: list[float] = [ANGLE]) -> tuple[list[Record], dict]
                 continue
             x, rho, vmax, wall = samples[-1]
             y_l, residual, pm_l, residual_mean, y_s = layer_pressures(x[:, 1], rho, wall, mat, h)
-            depth = y_s - float(x[:, 1].min())
+            depth = y_s - float(x[wall < 0, 1].min())  # of the particles inside the walls
             data[(method, angle)] = (y_l, pm_l, y_s)
             scale = RHO * G * depth
 
