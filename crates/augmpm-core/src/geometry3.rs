@@ -341,6 +341,9 @@ impl Solid {
     }
 }
 
+/// Surface points of the drawn walls by spacing (m), shared by clones of the same walls.
+type SampleCache = std::sync::Arc<std::sync::Mutex<Vec<(Real, std::sync::Arc<Vec<BoundaryPoint<3>>>)>>>;
+
 /// The material region of a 3D scene: inside the domain box and on the material side of every wall.
 /// Wall `i < walls.len()` is a scene wall; index `walls.len()` is the domain box. A moving wall is its
 /// drawn solid placed by its pose ([`Motion3`]): distances, feet and boundary points are taken in the
@@ -360,7 +363,7 @@ pub struct Walls3 {
     sweep: Real,
     /// The drawn walls' surface points at the spacings (m) asked for, each sampled once (the grid's, and
     /// that of the frames): moving walls' points are placed.
-    drawn_points: std::sync::Arc<std::sync::Mutex<Vec<(Real, std::sync::Arc<Vec<BoundaryPoint<3>>>)>>>,
+    drawn_points: SampleCache,
 }
 
 impl Walls3 {

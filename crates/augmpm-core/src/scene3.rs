@@ -736,7 +736,7 @@ impl Scene3 {
                     Solid::Shell { mesh, half } => mesh.sample_candidates(spacing, Some(wide(*half))),
                     _ => 0.0,
                 };
-                if candidates.is_nan() || candidates > MAX_BOUNDARY_POINTS as f64 {
+                if candidates.is_nan() || candidates > wide(MAX_BOUNDARY_POINTS) {
                     return Err(SceneError::new(
                         format!("walls[{i}]"),
                         format!("sampling this mesh at the augmented grid's spacing would try about {candidates:.3e} points (at most {MAX_BOUNDARY_POINTS:e}); split its long triangles, or raise augmented.spacing"),
