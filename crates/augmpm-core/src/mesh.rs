@@ -77,6 +77,50 @@ fn refuse<T>(key: &'static str, reason: impl Into<String>) -> Result<T, MeshErro
     Err(MeshError { key, reason: reason.into() })
 }
 
+/// Candidate feet of one particle (foot, normal into the wall, distance), the nearest [`Feet::MOST`].
+struct Feet {
+    found: [(V, V, f64); Feet::MOST],
+    len: usize,
+}
+
+impl Default for Feet {
+    fn default() -> Self {
+        Self { found: [(V::zeros(), V::zeros(), f64::INFINITY); Feet::MOST], len: 0 }
+    }
+}
+
+impl Feet {
+    const MOST: usize = 16;
+
+    /// Adds a foot, or replaces the farthest when full and it is nearer.
+    fn offer(&mut self, q: V, n: V, d: f64) {
+        if self.len < Self::MOST {
+            self.found[self.len] = (q, n, d);
+            self.len += 1;
+        } else if let Some(far) = (0..Self::MOST).max_by(|&a, &b| self.found[a].2.total_cmp(&self.found[b].2)) {
+            if self.found[far].2 > d {
+                self.found[far] = (q, n, d);
+            }
+        }
+    }
+
+    /// Gives `add` the feet nearest first, each unless a foot given before has a normal within the angle
+    /// whose cosine is `cos` of its own.
+    fn keep_distinct(mut self, cos: f64, mut add: impl FnMut(V, V)) {
+        let found = &mut self.found[..self.len];
+        found.sort_by(|a, b| a.2.total_cmp(&b.2));
+        let mut kept = [V::zeros(); Self::MOST];
+        let mut count = 0;
+        for &(q, n, _) in found.iter() {
+            if kept[..count].iter().all(|m| m.dot(&n) < cos) {
+                kept[count] = n;
+                count += 1;
+                add(q, n);
+            }
+        }
+    }
+}
+
 /// Where a point of a triangle lies, from its barycentric coordinates: on a vertex, an edge or the face.
 enum Feature {
     Vertex(usize),
@@ -328,23 +372,11 @@ impl TriangleMesh {
     /// direction) only the nearest. `into` is +1 where the wall lies outside the mesh (a container),
     /// −1 where it lies inside (an obstacle); `add` gets each foot and its normal into the wall. One pass
     /// over the triangles whose boxes lie within `reach` finds both.
-    pub fn feet(&self, x: &V, reach: f64, into: f64, mut add: impl FnMut(V, V)) {
+    pub fn feet(&self, x: &V, reach: f64, into: f64, add: impl FnMut(V, V)) {
         if self.bounds_distance(x) >= reach {
             return;
         }
-        const MOST: usize = 16;
-        let mut found = [(V::zeros(), V::zeros(), f64::INFINITY); MOST];
-        let mut len = 0;
-        let mut offer = |q: V, n: V, d: f64| {
-            if len < MOST {
-                found[len] = (q, n, d);
-                len += 1;
-            } else if let Some(far) = (0..MOST).max_by(|&a, &b| found[a].2.total_cmp(&found[b].2)) {
-                if found[far].2 > d {
-                    found[far] = (q, n, d);
-                }
-            }
-        };
+        let mut found = Feet::default();
         let tolerance = f64::EPSILON.sqrt() * reach;
         let point = Point3::from(*x);
         let aabb = Aabb::new(Point3::from(x - V::repeat(reach)), Point3::from(x + V::repeat(reach)));
@@ -362,7 +394,7 @@ impl TriangleMesh {
             let perpendicular = matches!(location, TrianglePointLocation::OnFace(..))
                 || (x - q).cross(&self.normals[t]).norm() <= 1e-9 * distance;
             if perpendicular && (q - x).dot(&normal) >= -tolerance {
-                offer(q, normal, distance);
+                found.offer(q, normal, distance);
             }
             if nearest.as_ref().is_none_or(|(best, ..)| distance < *best) {
                 nearest = Some((distance, q, t, location));
@@ -370,19 +402,9 @@ impl TriangleMesh {
         }
         if let Some((distance, q, t, location)) = nearest {
             let (_, n) = self.signed_from(x, &q, t, &location);
-            offer(q, n * into, distance);
+            found.offer(q, n * into, distance);
         }
-        let found = &mut found[..len];
-        found.sort_by(|a, b| a.2.total_cmp(&b.2));
-        let mut kept: [V; MOST] = [V::zeros(); MOST];
-        let mut count = 0;
-        for &(q, n, _) in found.iter() {
-            if kept[..count].iter().all(|m| m.dot(&n) < self.crease_cos) {
-                kept[count] = n;
-                count += 1;
-                add(q, n);
-            }
-        }
+        found.keep_distinct(self.crease_cos, add);
     }
 
     /// How many candidate points [`TriangleMesh::sample`] (or, with `half` (m), the thin wall's
@@ -518,23 +540,11 @@ impl TriangleMesh {
     /// nearest point, and the perpendiculars to the faces within reach whose foot lands inside them,
     /// offset by `half` towards `x`; of feet whose normals differ by less than the crease angle of a closed
     /// mesh (here 30°) only the nearest.
-    pub fn shell_feet(&self, x: &V, reach: f64, half: f64, mut add: impl FnMut(V, V)) {
+    pub fn shell_feet(&self, x: &V, reach: f64, half: f64, add: impl FnMut(V, V)) {
         if self.bounds_distance(x) >= reach + half {
             return;
         }
-        const MOST: usize = 16;
-        let mut found = [(V::zeros(), V::zeros(), f64::INFINITY); MOST];
-        let mut len = 0;
-        let mut offer = |q: V, n: V, d: f64| {
-            if len < MOST {
-                found[len] = (q, n, d);
-                len += 1;
-            } else if let Some(far) = (0..MOST).max_by(|&a, &b| found[a].2.total_cmp(&found[b].2)) {
-                if found[far].2 > d {
-                    found[far] = (q, n, d);
-                }
-            }
-        };
+        let mut found = Feet::default();
         let point = Point3::from(*x);
         let around = reach + half;
         let aabb = Aabb::new(Point3::from(x - V::repeat(around)), Point3::from(x + V::repeat(around)));
@@ -552,25 +562,14 @@ impl TriangleMesh {
             if matches!(location, TrianglePointLocation::OnFace(..)) && distance > 0.0 {
                 let side = if (x - q).dot(&self.normals[t]) >= 0.0 { 1.0 } else { -1.0 };
                 let out = self.normals[t] * side;
-                offer(q + out * half, -out, (distance - half).abs());
+                found.offer(q + out * half, -out, (distance - half).abs());
             }
         }
         if let Some((distance, q, t)) = nearest {
             let out = if distance > 1e-12 * self.size { (x - q) / distance } else { self.normals[t] };
-            offer(q + out * half, -out, (distance - half).abs());
+            found.offer(q + out * half, -out, (distance - half).abs());
         }
-        let found = &mut found[..len];
-        found.sort_by(|a, b| a.2.total_cmp(&b.2));
-        let crease = (std::f64::consts::PI / 6.0).cos();
-        let mut kept: [V; MOST] = [V::zeros(); MOST];
-        let mut count = 0;
-        for &(q, n, _) in found.iter() {
-            if kept[..count].iter().all(|m| m.dot(&n) < crease) {
-                kept[count] = n;
-                count += 1;
-                add(q, n);
-            }
-        }
+        found.keep_distinct((std::f64::consts::PI / 6.0).cos(), add);
     }
 
     /// Points on the thin wall's surface at most `spacing` (m) apart, with their outward normals: the points

@@ -55,21 +55,27 @@ def _walls(kind: str, angle: float, resolution: int) -> tuple[str, callable, cal
     return json.dumps(scene), field, judged
 
 
-def errors(kind: str, angle: float, method: str, resolution: int, samples: int = 20000) -> tuple[float, float]:
-    """RMS and max absolute error (m) of the reconstruction in the judged band."""
-    scene, field, judged = _walls(kind, angle, resolution)
+def reconstruction_errors(scene: str, method: str, field: callable, query: np.ndarray) -> tuple[float, float]:
+    """RMS and max absolute error (m) at `query` of the field reconstructed on the grid of `scene` (JSON, 2D
+    or 3D) from its values at the grid points: naive, nodes beyond the wall holding the wall value 0;
+    augmented, the included nodes and the boundary points, which hold the field's value on the wall."""
     grid = _core.Grid(scene, method)
-    h = 1.0 / resolution
     nodes = grid.nodes
     inside = grid.wall_distance(nodes) < 0
     node_values = np.where(inside, field(nodes), 0.0)
     values = np.concatenate([node_values, field(grid.boundary_points)]) if method == "augmented" else node_values
-    rng = np.random.default_rng(1)
-    query = rng.random((samples * 20, 2))
-    query = query[judged(query, h)][:samples]
     recon, _ = grid.interpolate(values, np.ascontiguousarray(query))
     err = np.abs(recon - field(query))
     return float(np.sqrt(np.mean(err**2))), float(err.max())
+
+
+def errors(kind: str, angle: float, method: str, resolution: int, samples: int = 20000) -> tuple[float, float]:
+    """RMS and max absolute error (m) of the reconstruction in the judged band."""
+    scene, field, judged = _walls(kind, angle, resolution)
+    rng = np.random.default_rng(1)
+    query = rng.random((samples * 20, 2))
+    query = query[judged(query, 1.0 / resolution)][:samples]
+    return reconstruction_errors(scene, method, field, query)
 
 
 def run(quick: bool, angles: list[float]) -> tuple[list[Record], dict]:

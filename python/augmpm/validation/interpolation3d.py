@@ -11,9 +11,9 @@ import json
 
 import numpy as np
 
-from augmpm import _core
 from augmpm.validation.common import METHODS, observed_order
 from augmpm.validation.incline3d import _frame
+from augmpm.validation.interpolation import reconstruction_errors
 from augmpm.validation.records import Record
 
 #: The sphere (an obstacle): centre and radius (m).
@@ -49,19 +49,11 @@ def _walls(kind: str, angle: float, resolution: int) -> tuple[str, callable]:
 def errors(kind: str, angle: float, method: str, resolution: int, samples: int = 20000) -> tuple[float, float]:
     """RMS and max absolute error (m) of the reconstruction within 2h of the wall, inside [0.15, 0.85]³."""
     scene, field = _walls(kind, angle, resolution)
-    grid = _core.Grid(scene, method)
-    h = 1.0 / resolution
-    nodes = grid.nodes
-    inside = grid.wall_distance(nodes) < 0
-    node_values = np.where(inside, field(nodes), 0.0)
-    values = np.concatenate([node_values, field(grid.boundary_points)]) if method == "augmented" else node_values
     rng = np.random.default_rng(1)
     query = 0.15 + 0.7 * rng.random((samples * 40, 3))
     d = field(query)
-    query = np.ascontiguousarray(query[(d > 0) & (d < 2 * h)][:samples])
-    recon, _ = grid.interpolate(values, query)
-    err = np.abs(recon - field(query))
-    return float(np.sqrt(np.mean(err**2))), float(err.max())
+    query = query[(d > 0) & (d < 2.0 / resolution)][:samples]
+    return reconstruction_errors(scene, method, field, query)
 
 
 def run(quick: bool, angles: list[float]) -> tuple[list[Record], dict]:
