@@ -179,8 +179,10 @@ impl TriangleMesh {
             }
             tris.push(tri.map(|i| welded[i]));
         }
-        let lo = points.iter().fold(V::repeat(f64::INFINITY), |m, p| m.inf(p));
-        let hi = points.iter().fold(V::repeat(f64::NEG_INFINITY), |m, p| m.sup(p));
+        // The bounding box of the vertices the triangles use (a file may list others).
+        let used = || tris.iter().flatten().map(|&i| &points[i as usize]);
+        let lo = used().fold(V::repeat(f64::INFINITY), |m, p| m.inf(p));
+        let hi = used().fold(V::repeat(f64::NEG_INFINITY), |m, p| m.sup(p));
         let size = (hi - lo).norm();
         let mut normals = Vec::with_capacity(tris.len());
         for (t, tri) in tris.iter().enumerate() {
