@@ -186,3 +186,16 @@ def test_bad_3d_motions_are_refused_naming_the_key():
         with pytest.raises(augmpm.SceneError) as e:
             augmpm.Simulation(augmpm.Scene3.from_dict(data))
         assert e.value.key == key, (e.value.key, e.value.reason)
+
+
+def test_a_moving_3d_wall_is_written_to_the_vtk_series_in_each_frame(tmp_path):
+    """A 3D run whose tank moves writes the tank's surface points in every frame (vtk/walls/, listed in
+    walls.pvd): the first and the last frame's points differ, by the tank's shake."""
+    from augmpm.run import run_scene
+
+    scene = augmpm.load_scene("moving/shaken_tank_3d")
+    result = run_scene(scene, tmp_path / "run", steps=60, progress=False, render=False)
+    pvd = (result.out / "walls.pvd").read_text()
+    files = sorted((result.out / "vtk" / "walls").glob("frame_*.vtp"))
+    assert len(files) == 4 and all(f.name in pvd for f in files)
+    assert files[0].read_text() != files[-1].read_text()

@@ -93,6 +93,9 @@ def test_a_3d_run_writes_3d_outputs_and_resumes_bitwise(tmp_path):
         header = next(csv.reader(f))
     assert header == METRIC_COLUMNS + wall_force_columns(1, 3)
     assert 'NumberOfPoints="' in (result.out / "vtk" / "frame_00001.vtp").read_text()
+    # The still container, once, as its surface points (at least one per h² of its 1.92 m² of faces).
+    walls = (result.out / "vtk" / "walls" / "walls.vtp").read_text()
+    assert int(walls.split('NumberOfPoints="')[1].split('"')[0]) > 1.92 * 16**2
     image = iio.imread(result.out / "frames" / "frame_00003.png")[..., :3].astype(int)
     blue = (image[..., 2] > image[..., 0] + 60) & (image[..., 2] > 90)  # tab10's first colour, shaded
     grey = (np.ptp(image, axis=2) < 8) & (image[..., 0] > 120) & (image[..., 0] < 230)

@@ -203,16 +203,16 @@ class _Run:
         # The walls of each frame (vtk/walls/, indexed by walls.pvd) when some move; still ones once
         # (vtk/walls/walls.vtp).
         outlines = sim.wall_outlines()
-        self.walls = any(moving for _, moving in outlines)
-        # 3D walls that move are drawn as their surface points in each frame.
+        # 3D walls are written and drawn as their surface points: in each frame where some move.
         self.walls_move_3d = sim.dim == 3 and any(getattr(w, "motion", None) is not None for w in sim.scene.walls)
+        self.walls = any(moving for _, moving in outlines) or self.walls_move_3d
         self.columns = METRIC_COLUMNS + wall_force_columns(len(sim.wall_impulse) - 1, sim.dim)
         # The walls' impulses at the last row, from which the next row's forces are measured.
         self.impulse_at = (sim.wall_impulse.copy(), sim.time)
         self.wall_frames = [(t, f.replace("vtk/", "vtk/walls/")) for t, f in self.vtk_frames] if self.walls else []
-        if outlines and not self.walls:
+        if (outlines or sim.dim == 3) and not self.walls:
             (out / "vtk" / "walls").mkdir(parents=True, exist_ok=True)
-            write_outlines_vtp(out / "vtk" / "walls" / "walls.vtp", [o for o, _ in outlines])
+            self._write_walls(out / "vtk" / "walls" / "walls.vtp")
         for sub in ("particles", "frames", "vtk", *(["vtk/walls"] if self.walls else [])):
             (out / sub).mkdir(exist_ok=True)
 
@@ -269,6 +269,16 @@ class _Run:
             raise failure
         return result
 
+    def _write_walls(self, path: Path, surface: np.ndarray | None = None) -> None:
+        """The walls where they are now: 2D outlines as polylines; in 3D, the walls' surface points half a
+        cell apart (`surface`, if already taken) as vertices."""
+        sim = self.sim
+        if sim.dim == 3:
+            points = sim.wall_points(0.5 * sim.cell_size) if surface is None else surface
+            write_vtp(path, points, {})
+        else:
+            write_outlines_vtp(path, [o for o, _ in sim.wall_outlines()])
+
     def output(self) -> None:
         """Writes frame ``self.frame``: its files, then its row of ``metrics.csv``, then a checkpoint if due."""
         sim, out = self.sim, self.out
@@ -280,15 +290,16 @@ class _Run:
         write_vtp(out / "vtk" / f"{name}.vtp", x, {"velocity": v, "body": body})
         self.vtk_frames.append((sim.time, f"vtk/{name}.vtp"))
         write_pvd(out / "particles.pvd", self.vtk_frames)
+        surface = sim.wall_points(0.5 * sim.cell_size) if self.walls_move_3d else None
         if self.walls:
-            write_outlines_vtp(out / "vtk" / "walls" / f"{name}.vtp", [o for o, _ in sim.wall_outlines()])
+            self._write_walls(out / "vtk" / "walls" / f"{name}.vtp", surface)
             self.wall_frames.append((sim.time, f"vtk/walls/{name}.vtp"))
             write_pvd(out / "walls.pvd", self.wall_frames)
         png = None
         if self.renderer is not None:
             moving = [outline for outline, moves in sim.wall_outlines() if moves]
-            if self.walls_move_3d:
-                moving = [sim.wall_points(0.5 * sim.cell_size)]
+            if surface is not None:
+                moving = [surface]
             png = self.renderer.draw(x, body, sim.time, out / "frames" / f"{name}.png", walls=moving)
         m = sim.metrics()
         row = {k: m[k] for k in METRIC_COLUMNS}
