@@ -506,23 +506,7 @@ impl TriangleMesh {
                 }
             }
         }
-        // Elimination on a hash grid of cells `radius` wide.
-        let cell = |x: &V| (x / radius).map(|c| c.floor() as i64);
-        let mut grid: HashMap<(i64, i64, i64), Vec<usize>> = HashMap::new();
-        let mut kept: Vec<(V, [V; 3])> = Vec::new();
-        for (x, normals) in corners.into_iter().chain(creases).chain(faces) {
-            let c = cell(&x);
-            let near =
-                (-1..=1).flat_map(|i| (-1..=1).flat_map(move |j| (-1..=1).map(move |k| (c.x + i, c.y + j, c.z + k))));
-            let taken = near
-                .into_iter()
-                .any(|key| grid.get(&key).is_some_and(|list| list.iter().any(|&p| (kept[p].0 - x).norm() < radius)));
-            if !taken {
-                grid.entry((c.x, c.y, c.z)).or_default().push(kept.len());
-                kept.push((x, normals));
-            }
-        }
-        kept
+        eliminate(corners.into_iter().chain(creases).chain(faces), radius)
     }
 }
 
@@ -610,24 +594,29 @@ impl TriangleMesh {
                 }
             }
         }
-        let radius = 0.7 * spacing;
-        let cell = |x: &V| (x / radius).map(|c| c.floor() as i64);
-        let mut grid: HashMap<(i64, i64, i64), Vec<usize>> = HashMap::new();
-        let mut kept: Vec<(V, V)> = Vec::new();
-        for (x, n) in candidates {
-            let c = cell(&x);
-            let near =
-                (-1..=1).flat_map(|i| (-1..=1).flat_map(move |j| (-1..=1).map(move |k| (c.x + i, c.y + j, c.z + k))));
-            let taken = near
-                .into_iter()
-                .any(|key| grid.get(&key).is_some_and(|list| list.iter().any(|&p| (kept[p].0 - x).norm() < radius)));
-            if !taken {
-                grid.entry((c.x, c.y, c.z)).or_default().push(kept.len());
-                kept.push((x, n));
-            }
-        }
-        kept
+        eliminate(candidates, 0.7 * spacing)
     }
+}
+
+/// Poisson-disk elimination: the candidates in order, each kept unless a kept one lies within `radius`
+/// (m) of it (looked up on a hash grid of cells `radius` wide).
+fn eliminate<T>(candidates: impl IntoIterator<Item = (V, T)>, radius: f64) -> Vec<(V, T)> {
+    let cell = |x: &V| (x / radius).map(|c| c.floor() as i64);
+    let mut grid: HashMap<(i64, i64, i64), Vec<usize>> = HashMap::new();
+    let mut kept: Vec<(V, T)> = Vec::new();
+    for (x, data) in candidates {
+        let c = cell(&x);
+        let near =
+            (-1..=1).flat_map(|i| (-1..=1).flat_map(move |j| (-1..=1).map(move |k| (c.x + i, c.y + j, c.z + k))));
+        let taken = near
+            .into_iter()
+            .any(|key| grid.get(&key).is_some_and(|list| list.iter().any(|&p| (kept[p].0 - x).norm() < radius)));
+        if !taken {
+            grid.entry((c.x, c.y, c.z)).or_default().push(kept.len());
+            kept.push((x, data));
+        }
+    }
+    kept
 }
 
 /// Builders of simple closed meshes, for tests and examples.
