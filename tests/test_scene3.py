@@ -77,8 +77,47 @@ def test_a_3d_simulation_has_3d_arrays_and_resumes_bitwise():
     again.step(60)
     assert np.array_equal(again.positions, sim.positions) and np.array_equal(again.velocities, sim.velocities)
     assert sim.wall_distance(np.array([[0.5, 0.45, 0.5]]))[0] < -0.2
-    with pytest.raises(augmpm.SceneError, match="2D scenes only"):
-        sim.set_wall_pose(0, (0.0, 0.0))
+
+
+def test_a_posed_3d_wall_carries_the_water_and_stays_in_the_checkpoint():
+    """A 3D container swayed from Python each step (a pose and a velocity along x, a rock about z as a
+    rotation vector) carries the water with it, none of it outside (augmented); its pose is part of the
+    checkpoint (one row of the wall's index and 13 numbers), and a simulation restored from it continues
+    bitwise identically. A pose with a wrong count of numbers, or of a plane, is refused naming the
+    argument."""
+    scene = augmpm.Scene3.from_dict(_tank())
+    sim = augmpm.Simulation(scene, "augmented", threads=1)
+    sim.step(20)
+    x0 = np.average(sim.positions[:, 0], weights=sim.masses)
+    t0 = sim.time
+    for k in range(60):
+        t = sim.time - t0
+        offset, speed = 0.02 * np.sin(8.0 * t), 0.16 * np.cos(8.0 * t)
+        sim.set_wall_pose(0, (offset, 0.0, 0.0), angle=(0.0, 0.0, offset), velocity=(speed, 0.0, 0.0),
+                          angular_velocity=(0.0, 0.0, speed))  # fmt: skip
+        sim.step(1)
+        assert sim.metrics()["n_outside"] == 0, f"step {k}"
+    state = sim.checkpoint()
+    assert state["wall_pose"].shape == (1, 14) and state["wall_pose"][0, 0] == 0
+    sim.step(20)
+    again = augmpm.Simulation(scene, "augmented", threads=2)
+    again.restore(state)
+    again.step(20)
+    assert np.array_equal(again.positions, sim.positions)
+    assert abs(np.average(sim.positions[:, 0], weights=sim.masses) - x0) > 1e-4
+    for args, key in [
+        ((0, (0.0, 0.0)), "position"),
+        ((0, (0.0, 0.0, 0.0), 0.1), "angle"),
+        ((0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0)), "velocity"),
+        ((1, (0.0, 0.0, 0.0)), "wall"),
+    ]:
+        with pytest.raises(augmpm.SceneError) as e:
+            sim.set_wall_pose(*args)
+        assert e.value.key == key
+    plane = augmpm.Scene3.from_dict(_tank(walls=[{"type": "plane", "point": [0.5, 0.2, 0.5], "normal": [0, 1, 0]}]))
+    with pytest.raises(augmpm.SceneError, match="plane, which cannot move") as e:
+        augmpm.Simulation(plane, "augmented").set_wall_pose(0, (0.0, 0.0, 0.0))
+    assert e.value.key == "wall"
 
 
 def test_a_3d_run_writes_3d_outputs_and_resumes_bitwise(tmp_path):
@@ -182,7 +221,11 @@ def test_a_refused_restore_changes_nothing():
         sim.restore(state)
     posed = sim.checkpoint()
     posed["wall_pose"] = np.array([[0.0, sim.time, 0.0, 0.0, 0.0, 0.1, 0.0, 0.0]])
-    with pytest.raises(augmpm.SceneError, match="2D scenes only"):
+    with pytest.raises(augmpm.SceneError, match=r"shape \[1, 14\]"):
+        sim.restore(posed)
+    # Thirteen numbers, but the wall moves 1 km/s.
+    posed["wall_pose"] = np.array([[0.0, sim.time, 0, 0, 0, 0, 0, 0, 1e3, 0, 0, 0, 0, 0]])
+    with pytest.raises(augmpm.SceneError, match="cells in a step"):
         sim.restore(posed)
     sim.step(30)
     twin.step(30)

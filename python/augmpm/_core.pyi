@@ -53,10 +53,10 @@ class Simulation:
     def set_wall_pose(
         self,
         wall: int,
-        position: tuple[float, float],
-        angle: float = 0.0,
-        velocity: tuple[float, float] = (0.0, 0.0),
-        angular_velocity: float = 0.0,
+        position: list[float],
+        angle: list[float],
+        velocity: list[float],
+        angular_velocity: list[float],
     ) -> None: ...
     @property
     def wall_impulse(self) -> npt.NDArray[np.float64]: ...

@@ -179,28 +179,36 @@ class Simulation:
         self,
         wall: int,
         position: Sequence[float],
-        angle: float = 0.0,
-        velocity: Sequence[float] = (0.0, 0.0),
-        angular_velocity: float = 0.0,
+        angle: float | Sequence[float] = 0.0,
+        velocity: Sequence[float] | None = None,
+        angular_velocity: float | Sequence[float] = 0.0,
     ) -> None:
         """Puts scene wall ``wall`` (its index in ``walls``) where it is from now on, between steps: its
         pivot (the ``motion``'s ``pivot``, else the wall's centre) displaced by ``position`` (m) from where
-        the scene draws it, turned by ``angle`` (rad, counter-clockwise) about it, and moving from now on
-        at ``velocity`` (m/s) and ``angular_velocity`` (rad/s) until set again; the wall's ``motion``, if
-        any, no longer acts. The pose is part of the state (:meth:`checkpoint`).
+        the scene draws it, turned by ``angle`` about it, and moving from now on at ``velocity`` (m/s,
+        default at rest) and ``angular_velocity`` until set again; the wall's ``motion``, if any, no longer
+        acts. The pose is part of the state (:meth:`checkpoint`).
 
-        Raises :class:`augmpm.SceneError` naming the argument: a wall that does not exist, a non-finite
-        number, a pose more than one cell from where the wall is now, a velocity that moves it more than
-        a cell in a step, or a simulation that cannot follow moving walls.
+        In 2D ``angle`` (rad) and ``angular_velocity`` (rad/s) are numbers, counter-clockwise. In 3D they
+        are rotation vectors (3 numbers each: about their direction, by their length; ``angle`` is
+        applied first, then the turn at ``angular_velocity`` since now); a single number 0 means none. A
+        3D plane cannot be posed.
+
+        Raises :class:`augmpm.SceneError` naming the argument: a wall that does not exist or cannot move,
+        a non-finite number or a wrong count of them, a pose more than one cell from where the wall is
+        now, a velocity that moves it more than a cell in a step, or a simulation that cannot follow
+        moving walls.
         """
         if not isinstance(wall, (int, np.integer)) or isinstance(wall, bool) or not 0 <= wall < 2**32:
             raise _plain_error("wall", f"must be a wall index (an integer from 0), got {wall!r}")
+        dim = self.dim
+        velocity = (0.0,) * dim if velocity is None else velocity
         self._sim.set_wall_pose(
             int(wall),
-            _pair("position", position),
-            _number("angle", angle),
-            _pair("velocity", velocity),
-            _number("angular_velocity", angular_velocity),
+            _vector("position", position, dim),
+            _turn("angle", angle, dim),
+            _vector("velocity", velocity, dim),
+            _turn("angular_velocity", angular_velocity, dim),
         )
 
     @property
@@ -243,13 +251,23 @@ def _number(key: str, value: Any) -> float:
     return number
 
 
-def _pair(key: str, value: Any) -> tuple[float, float]:
-    """``value`` as two finite floats, or a SceneError naming ``key``."""
+def _vector(key: str, value: Any, dim: int) -> list[float]:
+    """``value`` as ``dim`` finite floats, or a SceneError naming ``key``."""
     if isinstance(value, np.ndarray):
         value = value.tolist() if value.ndim == 1 else None
-    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) or len(value) != 2:
-        raise _plain_error(key, f"must be two numbers [x, y], got {value!r}")
-    return (_number(key, value[0]), _number(key, value[1]))
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) or len(value) != dim:
+        raise _plain_error(key, f"must be {dim} numbers {['[x, y]', '[x, y, z]'][dim - 2]}, got {value!r}")
+    return [_number(key, v) for v in value]
+
+
+def _turn(key: str, value: Any, dim: int) -> list[float]:
+    """A turn as the engine takes it: one finite float in 2D; a rotation vector of 3 in 3D (a single 0
+    for none). A SceneError names ``key`` otherwise."""
+    if dim == 2:
+        return [_number(key, value)]
+    if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and value == 0:
+        return [0.0, 0.0, 0.0]
+    return _vector(key, value, 3)
 
 
 THREADS_ENV = "AUGMPM_THREADS"

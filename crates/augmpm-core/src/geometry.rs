@@ -164,11 +164,17 @@ pub trait Region<const D: usize>: Send + Sync {
 
     /// Sets the poses of the walls that `poses` names (wall, pose), sorted by wall; the others
     /// move as their scene says. Takes effect at the next [`Region::set_time`].
-    fn set_poses(&mut self, _poses: &[(usize, WallPose)]) {}
+    fn set_poses(&mut self, _poses: &[(usize, WallPose<D>)]) {}
+
+    /// Why wall `wall` cannot be posed from outside, if it cannot (a wall that does not move in any
+    /// pose, such as an endless plane).
+    fn unposable(&self, _wall: usize) -> Option<String> {
+        None
+    }
 
     /// How far (m) a point of wall `wall` jumps from where it is now to where `pose` puts it at
     /// `pose.time`, and the top speed (m/s) of its points in that pose.
-    fn pose_change(&self, _wall: usize, _pose: &WallPose) -> (Real, Real) {
+    fn pose_change(&self, _wall: usize, _pose: &WallPose<D>) -> (Real, Real) {
         (0.0, 0.0)
     }
 
@@ -485,7 +491,7 @@ pub struct Walls2 {
     drawn: Vec<WallShape>,
     moves: Vec<Option<Motion>>,
     /// Poses set from outside (`Simulation::set_wall_pose`), which take over from `moves`.
-    set: Vec<Option<WallPose>>,
+    set: Vec<Option<WallPose<2>>>,
     /// Each moving wall's pose now and at the end of the step, and the step (s).
     now: Vec<Pose>,
     next: Vec<Pose>,
@@ -733,13 +739,13 @@ impl Region<2> for Walls2 {
         self.walls.len()
     }
 
-    fn pose_change(&self, wall: usize, pose: &WallPose) -> (Real, Real) {
+    fn pose_change(&self, wall: usize, pose: &WallPose<2>) -> (Real, Real) {
         let (now, reach) = (self.now[wall], self.reach(wall));
         let new = pose.pose(pose.time, self.pivot(wall));
         ((new.offset - now.offset).norm() + (new.angle - now.angle).abs() * reach, pose.top_speed(reach))
     }
 
-    fn set_poses(&mut self, poses: &[(usize, WallPose)]) {
+    fn set_poses(&mut self, poses: &[(usize, WallPose<2>)]) {
         self.set.fill(None);
         for &(wall, pose) in poses {
             self.set[wall] = Some(pose);

@@ -10,7 +10,7 @@
 use crate::geometry::{Region, Side, WallDistance, WallFeet, WallFoot};
 use crate::math::{Matrix, Real, Vector};
 use crate::mesh::TriangleMesh;
-use crate::motion::{Motion3, Pose3};
+use crate::motion::{Motion3, Pose3, WallPose};
 use crate::wall::BoundaryPoint;
 use std::sync::Arc;
 
@@ -355,6 +355,8 @@ pub struct Walls3 {
     extent: P3,
     /// Each wall's motion, if it moves.
     moves: Vec<Option<Motion3>>,
+    /// Poses set from outside (`Simulation::set_wall_pose`), which take over from `moves`.
+    set: Vec<Option<WallPose<3>>>,
     /// Each wall's pose at the start and at the end of the step ([`Region::set_time`]).
     now: Vec<Pose3>,
     next: Vec<Pose3>,
@@ -372,8 +374,8 @@ impl Walls3 {
         let domain = Solid::Box { centre: extent * 0.5, half: extent * 0.5, axes: Matrix::<3>::identity() };
         let n = walls.len();
         let (now, next) = (vec![Pose3::still(P3::zeros()); n], vec![Pose3::still(P3::zeros()); n]);
-        let moves = vec![None; n];
-        Self { walls, domain, extent, moves, now, next, dt: 0.0, sweep: 0.0, drawn_points: Default::default() }
+        let (moves, set) = (vec![None; n], vec![None; n]);
+        Self { walls, domain, extent, moves, set, now, next, dt: 0.0, sweep: 0.0, drawn_points: Default::default() }
     }
 
     /// The walls moving as `moves` says (one entry per wall), each about its motion's pivot or its
@@ -412,9 +414,20 @@ impl Walls3 {
             .max_by(|a, b| a.1.total_cmp(&b.1))
     }
 
+    /// Whether wall `wall` moves: by its scene's motion or posed from outside.
+    fn driven(&self, wall: usize) -> bool {
+        self.moves.get(wall).is_some_and(Option::is_some) || self.set.get(wall).is_some_and(Option::is_some)
+    }
+
     /// The pose of moving wall `wall` now, or none for a still one.
     fn pose(&self, wall: usize) -> Option<&Pose3> {
-        self.moves.get(wall).and_then(Option::as_ref).map(|_| &self.now[wall])
+        self.driven(wall).then(|| &self.now[wall])
+    }
+
+    /// The point wall `wall` turns about: its motion's pivot, else its centre as drawn.
+    fn pivot(&self, wall: usize) -> P3 {
+        let centre = self.walls[wall].solid.centre();
+        self.moves[wall].as_ref().and_then(Motion3::pivot).map_or(centre, P3::from)
     }
 
     /// The signed distance of wall `wall`'s material side (positive in the wall) and its normal there.
@@ -609,11 +622,29 @@ impl Region<3> for Walls3 {
     }
 
     fn moves(&self) -> bool {
-        self.moves.iter().any(Option::is_some)
+        (0..self.walls.len()).any(|i| self.driven(i))
     }
 
     fn is_moving(&self, wall: usize) -> bool {
-        self.moves.get(wall).is_some_and(Option::is_some)
+        self.driven(wall)
+    }
+
+    fn unposable(&self, wall: usize) -> Option<String> {
+        matches!(self.walls[wall].solid, Solid::HalfSpace { .. })
+            .then(|| format!("wall {wall} is a plane, which cannot move"))
+    }
+
+    fn set_poses(&mut self, poses: &[(usize, WallPose<3>)]) {
+        self.set.fill(None);
+        for &(wall, pose) in poses {
+            self.set[wall] = Some(pose);
+        }
+    }
+
+    fn pose_change(&self, wall: usize, pose: &WallPose<3>) -> (Real, Real) {
+        let pivot = self.pivot(wall);
+        let reach = self.walls[wall].solid.reach_from(&pivot);
+        (self.now[wall].distance_to(&pose.pose3(pose.time, pivot), reach), pose.top_speed(reach))
     }
 
     fn sweep(&self) -> Real {
@@ -624,12 +655,19 @@ impl Region<3> for Walls3 {
         self.dt = dt;
         self.sweep = 0.0;
         for i in 0..self.walls.len() {
-            if let Some(motion) = &self.moves[i] {
-                let centre = self.walls[i].solid.centre();
-                let before = self.now[i];
-                (self.now[i], self.next[i]) = (motion.pose(t, centre), motion.pose(t + dt, centre));
-                let reach = self.walls[i].solid.reach_from(&before.pivot);
-                let moved = before.distance_to(&self.now[i], reach);
+            let pivot = self.pivot(i);
+            let before = self.now[i];
+            (self.now[i], self.next[i]) = match (&self.set[i], &self.moves[i]) {
+                (Some(set), _) => (set.pose3(t, pivot), set.pose3(t + dt, pivot)),
+                (None, Some(motion)) => {
+                    let centre = self.walls[i].solid.centre();
+                    (motion.pose(t, centre), motion.pose(t + dt, centre))
+                }
+                // Still, or back where it is drawn (a restored state without the pose it had been set).
+                (None, None) => (Pose3::still(pivot), Pose3::still(pivot)),
+            };
+            if self.now[i] != before {
+                let moved = before.distance_to(&self.now[i], self.walls[i].solid.reach_from(&before.pivot));
                 self.sweep = if moved.is_nan() { Real::INFINITY } else { self.sweep.max(moved) };
             }
         }

@@ -111,45 +111,102 @@ impl Pose {
 }
 
 /// A pose set from outside between steps (`Simulation::set_wall_pose`): at `time` (s) the wall's pivot
-/// is displaced by `position` (m) from where the scene draws it and the wall is turned by `angle`
-/// (rad, counter-clockwise); from then on it moves at `velocity` (m/s) and `angular_velocity`
-/// (rad/s) until set again.
+/// is displaced by `position` (m) from where the scene draws it and the wall is turned by `angle`; from
+/// then on it moves at `velocity` (m/s) and turns at `angular_velocity` until set again.
+///
+/// Turns are rotation vectors (rad, rad/s): about their direction by their length. A 2D wall turns in
+/// its plane, about z: its angle (counter-clockwise) is `angle[2]`, and the other components are zero
+/// ([`WallPose::planar`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct WallPose {
+pub struct WallPose<const D: usize> {
     pub time: Real,
-    pub position: [Real; 2],
-    pub angle: Real,
-    pub velocity: [Real; 2],
-    pub angular_velocity: Real,
+    pub position: [Real; D],
+    pub angle: [Real; 3],
+    pub velocity: [Real; D],
+    pub angular_velocity: [Real; 3],
 }
 
-impl WallPose {
-    /// Its numbers in the order of a checkpoint row (after the wall's index).
-    pub const NAMES: [&'static str; 7] =
-        ["time", "position_x", "position_y", "angle", "velocity_x", "velocity_y", "angular_velocity"];
+impl<const D: usize> WallPose<D> {
+    /// The names of its numbers in the order of a checkpoint row (after the wall's index): in 2D
+    /// `angle` and `angular_velocity` are the turns about z.
+    pub fn names() -> &'static [&'static str] {
+        if D == 2 {
+            &["time", "position_x", "position_y", "angle", "velocity_x", "velocity_y", "angular_velocity"]
+        } else {
+            &[
+                "time",
+                "position_x",
+                "position_y",
+                "position_z",
+                "angle_x",
+                "angle_y",
+                "angle_z",
+                "velocity_x",
+                "velocity_y",
+                "velocity_z",
+                "angular_velocity_x",
+                "angular_velocity_y",
+                "angular_velocity_z",
+            ]
+        }
+    }
 
-    /// The pose at time `t` (s) of a wall turning about `pivot`.
-    pub fn pose(&self, t: Real, pivot: Point) -> Pose {
-        let s = t - self.time;
-        let offset = Point::new(self.position[0] + self.velocity[0] * s, self.position[1] + self.velocity[1] * s);
-        Pose { pivot, offset, angle: self.angle + self.angular_velocity * s }
+    /// Its numbers, in the order of [`WallPose::names`].
+    pub fn to_row(&self) -> Vec<Real> {
+        let turns = |a: &[Real; 3]| if D == 2 { a[2..].to_vec() } else { a.to_vec() };
+        let mut row = vec![self.time];
+        row.extend_from_slice(&self.position);
+        row.extend(turns(&self.angle));
+        row.extend_from_slice(&self.velocity);
+        row.extend(turns(&self.angular_velocity));
+        row
+    }
+
+    /// The pose of a row of [`WallPose::to_row`] (as many numbers as [`WallPose::names`]).
+    pub fn from_row(r: &[Real]) -> Self {
+        assert_eq!(r.len(), Self::names().len(), "a wall pose row has one number per name");
+        let k = if D == 2 { 1 } else { 3 };
+        let turn = |a: &[Real]| if D == 2 { [0.0, 0.0, a[0]] } else { [a[0], a[1], a[2]] };
+        Self {
+            time: r[0],
+            position: std::array::from_fn(|i| r[1 + i]),
+            angle: turn(&r[1 + D..]),
+            velocity: std::array::from_fn(|i| r[1 + D + k + i]),
+            angular_velocity: turn(&r[1 + 2 * D + k..]),
+        }
     }
 
     /// The largest speed (m/s) of a point at most `reach` (m) from the pivot.
     pub fn top_speed(&self, reach: Real) -> Real {
-        Point::new(self.velocity[0], self.velocity[1]).norm() + self.angular_velocity.abs() * reach
+        let norm = |a: &[Real]| a.iter().map(|c| c * c).sum::<Real>().sqrt();
+        norm(&self.velocity) + norm(&self.angular_velocity) * reach
     }
 
-    /// Its numbers, in the order of [`WallPose::NAMES`].
-    pub fn to_row(&self) -> [Real; 7] {
-        let [px, py] = self.position;
-        let [vx, vy] = self.velocity;
-        [self.time, px, py, self.angle, vx, vy, self.angular_velocity]
+    /// The displacement (m) of the pivot at time `t` (s).
+    fn offset(&self, t: Real) -> Vector<D> {
+        Vector::<D>::from_fn(|i, _| self.position[i] + self.velocity[i] * (t - self.time))
+    }
+}
+
+impl WallPose<2> {
+    /// A 2D pose: turned by `angle` (rad, counter-clockwise), turning at `angular_velocity` (rad/s).
+    pub fn planar(time: Real, position: [Real; 2], angle: Real, velocity: [Real; 2], angular_velocity: Real) -> Self {
+        Self { time, position, angle: [0.0, 0.0, angle], velocity, angular_velocity: [0.0, 0.0, angular_velocity] }
     }
 
-    /// The pose of a row of [`WallPose::to_row`].
-    pub fn from_row(r: [Real; 7]) -> Self {
-        Self { time: r[0], position: [r[1], r[2]], angle: r[3], velocity: [r[4], r[5]], angular_velocity: r[6] }
+    /// The pose at time `t` (s) of a wall turning about `pivot`.
+    pub fn pose(&self, t: Real, pivot: Point) -> Pose {
+        Pose { pivot, offset: self.offset(t), angle: self.angle[2] + self.angular_velocity[2] * (t - self.time) }
+    }
+}
+
+impl WallPose<3> {
+    /// The pose at time `t` (s) of a wall turning about `pivot`: turned by `angle`, then by
+    /// `angular_velocity` × (t − `time`).
+    pub fn pose3(&self, t: Real, pivot: P3) -> Pose3 {
+        let spin = nalgebra::Rotation3::new(P3::from(self.angular_velocity) * (t - self.time));
+        let rotation = spin * nalgebra::Rotation3::new(P3::from(self.angle));
+        Pose3 { pivot, offset: self.offset(t), rotation: rotation.into_inner() }
     }
 }
 

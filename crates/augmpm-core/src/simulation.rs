@@ -47,7 +47,7 @@ where
     /// Puts moving walls where they are at time `t` (s), moving over the step that starts there (the
     /// walls `poses` names as set there, the others as their scene says), and has the wall treatment
     /// follow them.
-    pub fn follow_walls(&mut self, t: Real, poses: &[(usize, WallPose)]) {
+    pub fn follow_walls(&mut self, t: Real, poses: &[(usize, WallPose<D>)]) {
         self.region.set_poses(poses);
         self.region.set_time(t, self.dt);
         for wall in 0..self.region.num_walls() {
@@ -143,7 +143,7 @@ pub struct State<const D: usize> {
     pub wall_impulse: Vec<Vector<D>>,
     /// The poses set by [`Simulation::set_wall_pose`], by wall (sorted); the other walls move as their
     /// scene says.
-    pub wall_poses: Vec<(usize, WallPose)>,
+    pub wall_poses: Vec<(usize, WallPose<D>)>,
 }
 
 /// The per-particle arrays of a [`State`] beyond its [`Particles`].
@@ -680,7 +680,7 @@ where
     /// nothing, with the argument it names and the reason: a wall that does not exist, a non-finite
     /// number, a wall point that would jump or move more than one cell in a step, or a simulation that
     /// cannot follow moving walls (the paper's transfer, the corrected grid density).
-    pub fn set_wall_pose(&mut self, wall: usize, pose: WallPose) -> Result<(), (&'static str, String)> {
+    pub fn set_wall_pose(&mut self, wall: usize, pose: WallPose<D>) -> Result<(), (&'static str, String)> {
         let pose = WallPose { time: self.state.time, ..pose };
         self.pose_refused(wall, &pose)?;
         let h = self.model.layout.h;
@@ -705,22 +705,29 @@ where
     }
 
     /// Why wall `wall` cannot take `pose` in this simulation, if it cannot (the argument and the reason):
-    /// a 3D scene, a wall that does not exist, a non-finite number, a transfer or density estimate that
-    /// assumes still walls, or a velocity of more than a cell per step. [`Simulation::set_wall_pose`] and
-    /// [`Simulation::restore`] ask it.
-    fn pose_refused(&self, wall: usize, pose: &WallPose) -> Result<(), (&'static str, String)> {
-        if D != 2 {
-            return Err(("wall", "walls are posed in 2D scenes only (3D walls do not move yet)".into()));
-        }
+    /// a wall that does not exist or cannot move (a 3D plane), a non-finite number, a 2D turn about
+    /// another axis than z, a transfer or density estimate that assumes still walls, or a velocity of
+    /// more than a cell per step. [`Simulation::set_wall_pose`] and [`Simulation::restore`] ask it.
+    fn pose_refused(&self, wall: usize, pose: &WallPose<D>) -> Result<(), (&'static str, String)> {
         let walls = self.model.region.num_walls();
         if wall >= walls {
             return Err(("wall", format!("there is no wall {wall}; the scene has {walls} walls")));
         }
+        if let Some(reason) = self.model.region.unposable(wall) {
+            return Err(("wall", reason));
+        }
         if let Some(k) = pose.to_row().iter().position(|a| !a.is_finite()) {
-            return Err((
-                ["time", "position", "position", "angle", "velocity", "velocity", "angular_velocity"][k],
-                "must be finite".into(),
-            ));
+            let name = WallPose::<D>::names()[k];
+            let argument = ["_x", "_y", "_z"].iter().find_map(|axis| name.strip_suffix(axis)).unwrap_or(name);
+            return Err((argument, "must be finite".into()));
+        }
+        if D == 2 {
+            if pose.angle[..2].iter().any(|&a| a != 0.0) {
+                return Err(("angle", "a 2D wall turns about z only".into()));
+            }
+            if pose.angular_velocity[..2].iter().any(|&a| a != 0.0) {
+                return Err(("angular_velocity", "a 2D wall turns about z only".into()));
+            }
         }
         if let Boundary::Augmented(g) = &self.model.boundary {
             if g.transfer == crate::treatment::augmented::AugmentedTransfer::Paper {

@@ -2,9 +2,9 @@
 //! per-particle field of `State::fields`, float64 or uint32, shape (N, ...)) and scalars (one per
 //! `State::scalars`), and back. The field table of the core drives both directions, for any D and
 //! either precision. The walls' part of the state: `wall_impulse` (float64, (walls + 1, D): each wall's
-//! impulse on the material so far, the domain box last) and `wall_pose` (float64, (k, 8): per wall
-//! posed from outside, its index and `WallPose::NAMES`); a checkpoint without them (written before
-//! they were kept) has no impulse counted and no posed wall.
+//! impulse on the material so far, the domain box last) and `wall_pose` (float64, (k, 8) in 2D, (k, 14)
+//! in 3D: per wall posed from outside, its index and `WallPose::names`); a checkpoint without them
+//! (written before they were kept) has no impulse counted and no posed wall.
 
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -64,9 +64,12 @@ macro_rules! state_conversions {
                 let poses: Vec<f64> = state
                     .wall_poses
                     .iter()
-                    .flat_map(|(w, p)| std::iter::once(*w as f64).chain(p.to_row().map(crate::convert::wide)))
+                    .flat_map(|(w, p)| {
+                        std::iter::once(*w as f64).chain(p.to_row().into_iter().map(crate::convert::wide))
+                    })
                     .collect();
-                d.set_item("wall_pose", PyArray1::from_vec(py, poses).reshape([state.wall_poses.len(), 8])?)?;
+                let columns = 1 + $core::motion::WallPose::<D>::names().len();
+                d.set_item("wall_pose", PyArray1::from_vec(py, poses).reshape([state.wall_poses.len(), columns])?)?;
                 Ok(d)
             }
 
@@ -104,14 +107,16 @@ macro_rules! state_conversions {
                 }
                 if dict.contains("wall_pose")? {
                     let rows = rows_of::<f64>(dict, "wall_pose", "float64")?;
-                    let flat = array_of::<f64>(dict, "wall_pose", rows, &[8], "float64")?;
-                    for row in flat.chunks(8) {
+                    let columns = 1 + $core::motion::WallPose::<D>::names().len();
+                    let flat = array_of::<f64>(dict, "wall_pose", rows, &[columns], "float64")?;
+                    for row in flat.chunks(columns) {
                         let wall = row[0];
                         if !(wall >= 0.0 && wall.fract() == 0.0 && wall < u32::MAX as f64) {
                             return Err(scene_error("state.wall_pose", &format!("{wall} is not a wall index")));
                         }
-                        let numbers: [$core::math::Real; 7] = std::array::from_fn(|k| row[k + 1] as $core::math::Real);
-                        state.wall_poses.push((wall as usize, $core::motion::WallPose::from_row(numbers)));
+                        let numbers: Vec<$core::math::Real> =
+                            row[1..].iter().map(|&a| a as $core::math::Real).collect();
+                        state.wall_poses.push((wall as usize, $core::motion::WallPose::from_row(&numbers)));
                     }
                 }
                 Ok(state)

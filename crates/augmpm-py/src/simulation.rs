@@ -372,30 +372,37 @@ impl PySimulation {
         })
     }
 
-    /// Sets scene wall `wall` where it is now: its pivot displaced by `position` (m) from where the scene
-    /// draws it, turned by `angle` (rad, counter-clockwise), moving from now on at `velocity` (m/s) and
-    /// `angular_velocity` (rad/s) until set again. Raises SceneError naming the argument (a wall that
-    /// does not exist, a jump or a step of more than one cell, a non-finite number).
-    #[pyo3(signature = (wall, position, angle=0.0, velocity=(0.0, 0.0), angular_velocity=0.0))]
+    /// Sets scene wall `wall` where it is now: its pivot displaced by `position` (m, D numbers) from where
+    /// the scene draws it, turned by `angle` (rad: one number in 2D, counter-clockwise; a rotation vector
+    /// in 3D), moving from now on at `velocity` (m/s) and `angular_velocity` (rad/s, as `angle`) until set
+    /// again. Raises SceneError naming the argument (a wall that does not exist or cannot move, a jump or
+    /// a step of more than one cell, a non-finite number, a wrong count of numbers).
     fn set_wall_pose(
         &mut self,
         wall: usize,
-        position: (f64, f64),
-        angle: f64,
-        velocity: (f64, f64),
-        angular_velocity: f64,
+        position: Vec<f64>,
+        angle: Vec<f64>,
+        velocity: Vec<f64>,
+        angular_velocity: Vec<f64>,
     ) -> PyResult<()> {
+        let dim = self.dim();
+        let turns = if dim == 2 { 1 } else { 3 };
+        for (key, numbers, count) in [
+            ("position", &position, dim),
+            ("angle", &angle, turns),
+            ("velocity", &velocity, dim),
+            ("angular_velocity", &angular_velocity, turns),
+        ] {
+            if numbers.len() != count {
+                return Err(scene_error(key, &format!("must have {count} numbers in {dim}D, got {}", numbers.len())));
+            }
+        }
+        let row: Vec<f64> = [&[0.0][..], &position, &angle, &velocity, &angular_velocity].concat();
         self.guarded(|engine| {
             with_sim!(engine, s, core => {
-                use core::math::Real;
-                let pose = core::motion::WallPose {
-                    time: 0.0,
-                    position: [position.0 as Real, position.1 as Real],
-                    angle: angle as Real,
-                    velocity: [velocity.0 as Real, velocity.1 as Real],
-                    angular_velocity: angular_velocity as Real,
-                };
-                s.set_wall_pose(wall, pose).map_err(|(key, reason)| scene_error(key, &reason))
+                let row: Vec<core::math::Real> = row.iter().map(|&a| a as core::math::Real).collect();
+                s.set_wall_pose(wall, core::motion::WallPose::from_row(&row))
+                    .map_err(|(key, reason)| scene_error(key, &reason))
             })
         })
     }
