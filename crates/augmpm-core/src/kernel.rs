@@ -33,19 +33,78 @@ impl<const D: usize> Stencil<D> {
         Self { base, w, fx }
     }
 
-    /// Calls `f(offset, weight, x_i − x_p)` for every node of the stencil; the
+    /// Calls `f(offset, weight, x_i − x_p)` for every node of the stencil, the first axis fastest; the
     /// distance is in metres (`h` is the grid spacing).
     #[inline]
     pub fn for_each(&self, h: Real, mut f: impl FnMut([usize; D], Real, Vector<D>)) {
-        for k in 0..stencil_len(D) {
-            let o = stencil_offset::<D>(k);
+        self.visit(h, &[0; D], |o, _, w, d| f(o, w, d));
+    }
+
+    /// Calls `f(i, weight, x_i − x_p)` for every node of the stencil, in the order of
+    /// [`Stencil::for_each`], with `i = origin + Σ_k o_k strides_k` the node's index in a grid of those
+    /// strides whose stencil origin is `origin`.
+    #[inline]
+    pub fn for_each_index(
+        &self,
+        h: Real,
+        origin: usize,
+        strides: &[usize; D],
+        mut f: impl FnMut(usize, Real, Vector<D>),
+    ) {
+        self.visit(h, strides, |_, i, w, d| f(origin + i, w, d));
+    }
+
+    /// The loop of [`Stencil::for_each`] and [`Stencil::for_each_index`]: nested per axis in 2D and 3D
+    /// (no index arithmetic per node), with the weight the product `((1·w₀)·w₁)·w₂` in that order.
+    #[inline(always)]
+    fn visit(&self, h: Real, strides: &[usize; D], mut f: impl FnMut([usize; D], usize, Real, Vector<D>)) {
+        let mut dk = [[0.0; 3]; D];
+        for a in 0..D {
+            for (j, d) in dk[a].iter_mut().enumerate() {
+                *d = (j as Real - self.fx[a]) * h;
+            }
+        }
+        let node = |o: [usize; D]| {
             let mut weight = 1.0;
             let mut dpos = Vector::<D>::zeros();
+            let mut i = 0;
             for a in 0..D {
                 weight *= self.w[a][o[a]];
-                dpos[a] = (o[a] as Real - self.fx[a]) * h;
+                dpos[a] = dk[a][o[a]];
+                i += o[a] * strides[a];
             }
-            f(o, weight, dpos);
+            (i, weight, dpos)
+        };
+        match D {
+            2 => {
+                for b in 0..3 {
+                    for a in 0..3 {
+                        let mut o = [0; D];
+                        (o[0], o[1]) = (a, b);
+                        let (i, w, d) = node(o);
+                        f(o, i, w, d);
+                    }
+                }
+            }
+            3 => {
+                for c in 0..3 {
+                    for b in 0..3 {
+                        for a in 0..3 {
+                            let mut o = [0; D];
+                            (o[0], o[1], o[2]) = (a, b, c);
+                            let (i, w, d) = node(o);
+                            f(o, i, w, d);
+                        }
+                    }
+                }
+            }
+            _ => {
+                for k in 0..stencil_len(D) {
+                    let o = stencil_offset::<D>(k);
+                    let (i, w, d) = node(o);
+                    f(o, i, w, d);
+                }
+            }
         }
     }
 }
@@ -171,6 +230,29 @@ impl<const D: usize> MlsInverse<D> {
 mod tests {
     use super::*;
     use nalgebra::Vector2;
+
+    /// The stencil visits its 3^D nodes in the order of `stencil_offset` (first axis fastest), each with
+    /// the weight `Π_k w_k` multiplied in axis order, `x_i − x_p`, and its index from the strides: the
+    /// sums of every transfer are taken in that order, so it is part of the bitwise results.
+    #[test]
+    fn the_stencil_visits_nodes_in_offset_order() {
+        fn check<const D: usize>(x: Vector<D>) {
+            let (h, strides) = (0.1, std::array::from_fn::<usize, D, _>(|k| 1 + 7 * k * k));
+            let s = Stencil::new(&x, 1.0 / h);
+            let mut k = 0;
+            s.for_each_index(h, 5, &strides, |i, w, d| {
+                let o = stencil_offset::<D>(k);
+                let weight = (0..D).fold(1.0, |acc, a| acc * s.w[a][o[a]]);
+                assert_eq!(w.to_bits(), weight.to_bits());
+                assert_eq!(i, 5 + (0..D).map(|a| o[a] * strides[a]).sum::<usize>());
+                assert_eq!(d, Vector::<D>::from_fn(|a, _| (o[a] as Real - s.fx[a]) * h));
+                k += 1;
+            });
+            assert_eq!(k, stencil_len(D));
+        }
+        check(Vector::<2>::new(0.337, 0.912));
+        check(Vector::<3>::new(0.337, 0.912, 0.5501));
+    }
 
     fn positions() -> Vec<Vector2<Real>> {
         // Deterministic spread of positions, including cell faces and centres.

@@ -36,7 +36,7 @@ pub fn scatter_mass<const D: usize>(
             reach.check(&s.base);
             let mp = mass[p as usize];
             // SAFETY: blocks scattered together never share a node (see `schedule`).
-            s.for_each(layout.h, |o, w, _| unsafe { out.update(origin + layout.offset(&o), |m| *m += w * mp) });
+            s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| unsafe { out.update(i, |m| *m += w * mp) });
         }
     });
 }
@@ -68,8 +68,8 @@ pub fn scatter_volume_ratio<const D: usize>(
             reach.check(&s.base);
             let (m, mj) = (vol0[p], vol0[p] * jp[p]);
             // SAFETY: blocks scattered together never share a node (see `schedule`).
-            s.for_each(layout.h, |o, w, _| unsafe {
-                out.update(origin + layout.offset(&o), |g| {
+            s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| unsafe {
+                out.update(i, |g| {
                     g.0 += w * m;
                     g.1 += w * mj;
                 })
@@ -99,7 +99,7 @@ pub fn volume_ratio_at<const D: usize>(
     grid: &[(Real, Real)],
 ) -> Real {
     let mut sum = 0.0;
-    s.for_each(layout.h, |o, w, _| sum += w * grid[origin + layout.offset(&o)].1);
+    s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| sum += w * grid[i].1);
     sum
 }
 
@@ -129,12 +129,11 @@ pub fn density_at<const D: usize>(
     let (mut sum, mut weight) = (0.0, 0.0);
     match wall_fraction {
         None => {
-            s.for_each(layout.h, |o, w, _| sum += w * grid_mass[origin + layout.offset(&o)]);
+            s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| sum += w * grid_mass[i]);
             sum * inv_cell_volume
         }
         Some(f) => {
-            s.for_each(layout.h, |o, w, _| {
-                let i = origin + layout.offset(&o);
+            s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| {
                 if f[i] >= MIN_WALL_FRACTION {
                     sum += w * grid_mass[i] / f[i];
                     weight += w;
@@ -275,8 +274,7 @@ pub fn p2g<const D: usize>(
                     // The farthest node of the stencil: one bounds check for the 3^D writes.
                     let last = origin + layout.offset(&[2; D]);
                     assert!(last < mass.len() && last < spline.len() && last < momentum.len());
-                    s.for_each(h, |o, w, d| {
-                        let i = origin + layout.offset(&o);
+                    s.for_each_index(h, origin, layout.strides(), |i, w, d| {
                         // SAFETY: i ≤ last, checked above; exclusive as stated above.
                         unsafe {
                             mass.update_unchecked(i, |m| *m += w * mp);
@@ -504,8 +502,8 @@ where
             match t.augmented.and_then(|(g, table)| table.entry(p).map(|e| (g, e))) {
                 None => {
                     let (s, origin) = stencil(layout, xp, inv_h);
-                    s.for_each(h, |o, w, d| {
-                        let vi = velocity[origin + layout.offset(&o)] * w;
+                    s.for_each_index(h, origin, layout.strides(), |i, w, d| {
+                        let vi = velocity[i] * w;
                         vn += vi;
                         cn += vi * d.transpose();
                     });

@@ -493,8 +493,7 @@ impl<const D: usize> AugmentedGrid<D> {
     ) -> Result<bool, OutOfGrid> {
         let s = Stencil::new(x, 1.0 / layout.h);
         let origin = layout.stencil_origin(&s.base).ok_or(OutOfGrid(p))?;
-        s.for_each(layout.h, |o, w, d| {
-            let i = origin + layout.offset(&o);
+        s.for_each_index(layout.h, origin, layout.strides(), |i, w, d| {
             if self.included[i] {
                 f(i, w, d);
             }
