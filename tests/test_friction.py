@@ -124,7 +124,7 @@ def test_a_block_on_a_rough_plane_at_a_compound_angle_in_3d(method, mu):
     from augmpm.validation import incline3d
 
     angle, res = 30.0, 32
-    n, t = incline3d._frame(angle)
+    n, t = incline3d.plane_frame(angle)
     point = np.array([0.5, 0.45, 0.5])
     edge = 0.1
     cube = np.array([[c & 1, (c >> 1) & 1, (c >> 2) & 1] for c in range(8)], dtype=float) - 0.5

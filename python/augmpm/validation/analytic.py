@@ -1,4 +1,4 @@
-"""Known answers: channel flows with their start-up series, and the Martin & Moyce (1952) surge front."""
+"""Known answers: channel and film flows with their start-up series, and the Martin & Moyce (1952) surge front."""
 
 from __future__ import annotations
 
@@ -25,6 +25,13 @@ def poiseuille(y: np.ndarray, t: float, force: float, nu: float, height: float) 
         return steady
     odd = lambda n: np.where(n % 2 == 1, 4 * force * height**2 / (nu * np.pi**3 * n**3), 0.0)  # noqa: E731
     return steady - _sine_series(y, t, height, nu, odd)
+
+
+def nusselt(y: np.ndarray, t: float, g_t: float, nu: float, depth: float) -> np.ndarray:
+    """Start-up of film flow from rest (Nusselt 1916) under the along-plane gravity g_t (m/s²): a film of
+    `depth` H on a no-slip plane, free on top, is the half of a Poiseuille channel of width 2H next to a wall
+    (its free surface the channel's plane of symmetry), so u = g_t/ν·(H y − y²/2) when steady; y from the plane (m)."""
+    return poiseuille(y, t, g_t, nu, 2 * depth)
 
 
 def couette(y: np.ndarray, t: float, u_lower: float, u_upper: float, nu: float, height: float) -> np.ndarray:

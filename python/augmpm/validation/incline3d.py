@@ -20,7 +20,7 @@ RADIUS = 0.06  # m
 AZIMUTH = math.radians(35.0)
 
 
-def _frame(angle: float) -> tuple[np.ndarray, np.ndarray]:
+def plane_frame(angle: float) -> tuple[np.ndarray, np.ndarray]:
     """The plane's normal (up out of it) and its downhill direction, for a tilt of `angle` degrees."""
     theta = math.radians(angle)
     d = np.array([math.cos(AZIMUTH), 0.0, math.sin(AZIMUTH)])
@@ -32,7 +32,7 @@ def _frame(angle: float) -> tuple[np.ndarray, np.ndarray]:
 def _scene(angle: float, resolution: int) -> tuple[dict, np.ndarray]:
     """The scene, and the plane's downhill direction."""
     h = 1.0 / resolution
-    n, t = _frame(angle)
+    n, t = plane_frame(angle)
     point = np.array([0.5, 0.45, 0.5])
     centre = point - 0.22 * t + n * (RADIUS + 0.1 * h)
     scene = {

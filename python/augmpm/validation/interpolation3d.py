@@ -12,7 +12,7 @@ import json
 import numpy as np
 
 from augmpm.validation.common import METHODS, observed_order
-from augmpm.validation.incline3d import _frame
+from augmpm.validation.incline3d import plane_frame
 from augmpm.validation.interpolation import reconstruction_errors
 from augmpm.validation.records import Record
 
@@ -31,7 +31,7 @@ def _walls(kind: str, angle: float, resolution: int) -> tuple[str, callable]:
         def field(x):
             return np.linalg.norm(x - np.asarray(centre), axis=1) - radius
     else:
-        n, _ = _frame(angle)
+        n, _ = plane_frame(angle)
         walls = [{"type": "plane", "point": list(POINT), "normal": n.tolist()}]
 
         def field(x):

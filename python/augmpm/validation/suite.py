@@ -12,8 +12,10 @@ import numpy as np
 
 from augmpm.files import save_png, write_text
 from augmpm.validation import (
+    analytic,
     channel,
     dam_break,
+    film3d,
     hydrostatic,
     hydrostatic3d,
     incline,
@@ -182,6 +184,21 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
         ax.set(xlabel="depth (m)", ylabel="pressure (Pa)", title=title)
 
     plots.append(("3D: hydrostatic pressure in a tilted box", _plot_simple(out, "hydrostatic3d.png", draw_hyd3)))
+
+    film = stage("3D: film flow down a plane at a compound angle", lambda: film3d.run(quick))
+
+    def draw_film(ax):
+        for (method, angle), (times, samples) in film.items():
+            for when, (y, u) in zip(times, samples, strict=True):
+                ax.plot(u, y, "o" if method == "augmented" else "x", ms=3, color=COLOURS[method],
+                        label=f"{method} {angle:g}°, t = {when / film3d.TAU:g} τ")  # fmt: skip
+        y = np.linspace(0, film3d.H, 50)
+        for when in (f * film3d.TAU for f in film3d.TIMES):
+            ax.plot(analytic.nusselt(y, when, film3d.G_T, film3d.NU, film3d.H), y, "k-", lw=0.8)
+        ax.set(xlabel="u along the plane (m/s)", ylabel="height above the plane (m)",
+               title="3D: film flow (lines: Nusselt start-up)")  # fmt: skip
+
+    plots.append(("3D: film flow down a plane", _plot_simple(out, "film3d.png", draw_film)))
 
     rot = stage("rotation in a circular container", lambda: rotation.run(quick))
 
