@@ -54,10 +54,11 @@ impl<const D: usize> Stencil<D> {
         self.visit(h, strides, |_, i, w, d| f(origin + i, w, d));
     }
 
-    /// The loop of [`Stencil::for_each`] and [`Stencil::for_each_index`]: nested per axis in 2D and 3D
-    /// (no index arithmetic per node), with the weight the product `((1·w₀)·w₁)·w₂` in that order.
+    /// Calls `f(offset, i − origin, weight, x_i − x_p)` for every node of the stencil, in the order of
+    /// [`Stencil::for_each`]: nested per axis in 2D and 3D (no index arithmetic per node), with the weight
+    /// the product `((1·w₀)·w₁)·w₂` in that order.
     #[inline(always)]
-    fn visit(&self, h: Real, strides: &[usize; D], mut f: impl FnMut([usize; D], usize, Real, Vector<D>)) {
+    pub fn visit(&self, h: Real, strides: &[usize; D], mut f: impl FnMut([usize; D], usize, Real, Vector<D>)) {
         let mut dk = [[0.0; 3]; D];
         for a in 0..D {
             for (j, d) in dk[a].iter_mut().enumerate() {
@@ -205,7 +206,7 @@ impl<const D: usize> MlsInverse<D> {
         let mut s = m.c - m.b * mean.transpose();
         let floor = ILL_CONDITIONED * m.a * h * h;
         let mut kind = MlsKind::General;
-        if Ops::min_sym_eigenvalue(&s) < floor {
+        if !Ops::at_least(&s, floor) {
             s += Matrix::<D>::identity() * floor;
             kind = MlsKind::Regularized;
         }

@@ -38,6 +38,10 @@ pub trait DimOps<const D: usize> {
     fn min_sym_eigenvalue(m: &Matrix<D>) -> Real;
     /// Inverse of `m`, if it is invertible.
     fn inverse(m: &Matrix<D>) -> Option<Matrix<D>>;
+    /// Whether the smallest eigenvalue of the symmetric matrix `m` is at least `floor`: in 2D
+    /// `min_sym_eigenvalue(m) >= floor`; in 3D whether `m − floor·I` has positive pivots (a Cholesky
+    /// factorisation without its square roots; the same answer but where the two are within rounding).
+    fn at_least(m: &Matrix<D>, floor: Real) -> bool;
 }
 
 macro_rules! impl_dim_ops {
@@ -84,6 +88,25 @@ macro_rules! impl_dim_ops {
             #[inline]
             fn inverse(m: &Matrix<$d>) -> Option<Matrix<$d>> {
                 m.try_inverse()
+            }
+            #[inline]
+            fn at_least(m: &Matrix<$d>, floor: Real) -> bool {
+                if $d == 2 {
+                    Self::min_sym_eigenvalue(m) >= floor
+                } else {
+                    let a = |i: usize, j: usize| m[(i, j)] - if i == j { floor } else { 0.0 };
+                    // Pivots d0, d1, d2 of m − floor·I = L diag(d) Lᵀ; a NaN pivot fails too.
+                    let d0 = a(0, 0);
+                    if d0 > 0.0 {
+                        let (l10, l20) = (a(1, 0) / d0, a(2, 0) / d0);
+                        let d1 = a(1, 1) - l10 * a(1, 0);
+                        if d1 > 0.0 {
+                            let l21 = (a(2, 1) - l20 * a(1, 0)) / d1;
+                            return a(2, 2) - l20 * a(2, 0) - l21 * l21 * d1 > 0.0;
+                        }
+                    }
+                    false
+                }
             }
         }
     };
@@ -236,6 +259,28 @@ mod tests {
         let m = r * Matrix3::from_diagonal(&nalgebra::Vector3::new(1.0, 1.0, 3.0)) * r.transpose();
         let a: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]));
         assert!((min_sym3_eigenvalue(&a) - 1.0).abs() < 1e-7);
+    }
+
+    /// The 3D pivot test says "the smallest eigenvalue is at least the floor" exactly when the eigenvalues
+    /// do, on random symmetric matrices with floors on both sides of it (but within 1e-9 of it).
+    #[test]
+    fn at_least_agrees_with_the_smallest_eigenvalue() {
+        let mut s = 0x9e3779b97f4a7c15u64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for _ in 0..2000 {
+            let g = Matrix3::from_fn(|_, _| next());
+            let m = (g * g.transpose() + Matrix3::from_fn(|_, _| 0.3 * next())).symmetric_part();
+            let lowest = m.symmetric_eigenvalues().min();
+            let floor = lowest + next();
+            if (floor - lowest).abs() > 1e-9 {
+                assert_eq!(Dim::<3>::at_least(&m, floor), lowest >= floor, "{m} against {floor}");
+            }
+        }
     }
 
     #[test]

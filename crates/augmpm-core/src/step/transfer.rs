@@ -306,8 +306,7 @@ pub fn p2g<const D: usize>(
                         AugmentedTransfer::Stable if total <= 0.0 => {}
                         AugmentedTransfer::Stable => {
                             let share = mp / total;
-                            g.for_each_near(layout, &x, near, |i, w, d| {
-                                let w = tilt.weight(w, &d);
+                            g.for_each_near_tilted(layout, &x, near, &tilt, |i, w, d| {
                                 let (_, grad) = minv.shape(w, &d);
                                 let m_i = w * share;
                                 unsafe {
@@ -511,8 +510,7 @@ where
                 }
                 Some((g, WallEntry { minv, near, tilt, slot, .. })) => {
                     let mut push = WallPush::none();
-                    g.for_each_near(layout, xp, near, |i, w, d| {
-                        let w = tilt.weight(w, &d);
+                    g.for_each_near_tilted(layout, xp, near, &tilt, |i, w, d| {
                         let vi = velocity[i];
                         let (phi, grad) = minv.shape(w, &d);
                         vn += vi * phi;

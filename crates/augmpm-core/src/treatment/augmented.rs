@@ -72,6 +72,15 @@ impl<const D: usize> Tilt<D> {
         Self { eta: Vector::<D>::zeros(), scale: 1.0 }
     }
 
+    /// Per axis a and stencil offset j, the factor `exp(η_a d_aj)` of the reweighting of the nodes of the
+    /// stencil `s` (spacing `h`, m): a node's `exp(η·d)` is the product of its three (in 3D, 9 exponentials
+    /// for 27 nodes). `None` without reweighting.
+    #[inline]
+    fn node_factors(&self, s: &Stencil<D>, h: Real) -> Option<[[Real; 3]; D]> {
+        (self.eta != Vector::<D>::zeros())
+            .then(|| std::array::from_fn(|a| [0, 1, 2].map(|j| (self.eta[a] * ((j as Real - s.fx[a]) * h)).exp())))
+    }
+
     /// The reweighted weight of a grid point with B-spline weight `w` at `d = x_i − x_p`.
     #[inline]
     pub fn weight(&self, w: Real, d: &Vector<D>) -> Real {
@@ -107,8 +116,14 @@ const MAX_POINTS: usize = crate::math::stencil_len(3) + MAX_NEAR;
 /// F(η) = log Σ w exp(η·d), whose gradient is the reweighted first moment and whose Hessian its
 /// covariance, by Newton's method in units of h (`inv_h` = 1/h), with steps of at most 1/h, within the
 /// limits [`TILT_MAX`] and [`TILT_SPREAD`]. The last iterate's moments are the MLS system's.
+///
+/// The first points are nodes of the particle's stencil at the `offsets` given, the particle at `fx`
+/// (cells) from its lowest node; in 3D their exponentials are products of per-axis factors (9 for 27
+/// nodes, equal to rounding).
 fn centred_tilt<const D: usize, Ops: DimOps<D>>(
     points: &[(Real, Vector<D>)],
+    offsets: &[[usize; D]],
+    fx: &Vector<D>,
     inv_h: Real,
     total: Real,
 ) -> (Tilt<D>, Moments<D>) {
@@ -117,9 +132,16 @@ fn centred_tilt<const D: usize, Ops: DimOps<D>>(
     let moments = |mu: &Vector<D>| {
         let mut m = Moments::new();
         let tilted = *mu != Vector::<D>::zeros();
-        for (w, d) in points {
+        let factors: Option<[[Real; 3]; D]> =
+            (D == 3 && tilted).then(|| std::array::from_fn(|a| [0, 1, 2].map(|j| (mu[a] * (j as Real - fx[a])).exp())));
+        for (k, (w, d)) in points.iter().enumerate() {
             let e = d * inv_h;
-            m.add(if tilted { w * mu.dot(&e).exp() } else { *w }, &e);
+            let w = match (factors, offsets.get(k)) {
+                (Some(f), Some(o)) => w * (0..D).map(|a| f[a][o[a]]).product::<Real>(),
+                _ if tilted => w * mu.dot(&e).exp(),
+                _ => *w,
+            };
+            m.add(w, &e);
         }
         let mean = m.b / m.a;
         (m, mean, m.c / m.a - mean * mean.transpose())
@@ -147,7 +169,7 @@ fn centred_tilt<const D: usize, Ops: DimOps<D>>(
                 trial *= TILT_MAX / trial.norm();
             }
             let (m_t, mean_t, cov_t) = moments(&trial);
-            if Ops::min_sym_eigenvalue(&cov_t) >= floor {
+            if Ops::at_least(&cov_t, floor) {
                 (mu, m, mean, cov, accepted) = (trial, m_t, mean_t, cov_t, true);
                 break;
             }
@@ -482,6 +504,43 @@ impl<const D: usize> AugmentedGrid<D> {
         self.for_each_cached(layout, x, 0, near, f).expect("particles were sorted into the grid this step");
     }
 
+    /// As [`Self::for_each_near`] with each weight reweighted by `tilt` ([`Tilt::weight`]). In 3D a node's
+    /// exponential is the product of per-axis factors ([`Tilt::node_factors`]): 9 exponentials instead of
+    /// 27, equal to rounding; in 2D it is [`Tilt::weight`] itself.
+    #[inline]
+    pub fn for_each_near_tilted(
+        &self,
+        layout: &GridLayout<D>,
+        x: &Vector<D>,
+        near: &NearPoints,
+        tilt: &Tilt<D>,
+        mut f: impl FnMut(usize, Real, Vector<D>),
+    ) {
+        if D != 3 || near.len == NearPoints::OVERFLOW {
+            return self.for_each_near(layout, x, near, |i, w, d| f(i, tilt.weight(w, &d), d));
+        }
+        let s = Stencil::new(x, 1.0 / layout.h);
+        let origin = layout.stencil_origin(&s.base).expect("particles were sorted into the grid this step");
+        match tilt.node_factors(&s, layout.h) {
+            None => s.visit(layout.h, layout.strides(), |_, i, w, d| {
+                if self.included[origin + i] {
+                    f(origin + i, w * tilt.scale, d);
+                }
+            }),
+            Some(e) => s.visit(layout.h, layout.strides(), |o, i, w, d| {
+                if self.included[origin + i] {
+                    let factor: Real = (0..D).map(|a| e[a][o[a]]).product();
+                    f(origin + i, w * tilt.scale * factor, d);
+                }
+            }),
+        }
+        let inv_h = 1.0 / layout.h;
+        for &b in &near.idx[..near.len as usize] {
+            let d = self.points[b as usize].x - x;
+            f(self.num_nodes() + b as usize, tilt.weight(weight(&d, inv_h), &d), d);
+        }
+    }
+
     /// The included nodes of the stencil at `x`; returns whether the closed form applies.
     #[inline]
     fn for_each_node(
@@ -581,8 +640,10 @@ impl<const D: usize> AugmentedGrid<D> {
         x: &Vector<D>,
         p: usize,
     ) -> Result<(MlsInverse<D>, MlsKind, NearPoints, Real, Tilt<D>), OutOfGrid> {
-        // The particle's points (B-spline weight, offset), gathered once for the Newton iterations.
+        // The particle's points (B-spline weight, offset), gathered once for the Newton iterations: its
+        // included nodes first, with their stencil offsets, then its boundary points.
         let mut points = [(0.0, Vector::<D>::zeros()); MAX_POINTS];
+        let mut offsets = [[0; D]; crate::math::stencil_len(3)];
         let mut len = 0;
         let mut total = 0.0;
         let mut keep = |w: Real, d: Vector<D>| {
@@ -592,7 +653,16 @@ impl<const D: usize> AugmentedGrid<D> {
                 len += 1;
             }
         };
-        self.for_each_node(layout, x, p, &mut |_, w, d| keep(w, d))?;
+        let s = Stencil::new(x, 1.0 / layout.h);
+        let origin = layout.stencil_origin(&s.base).ok_or(OutOfGrid(p))?;
+        let mut nodes = 0;
+        s.visit(layout.h, layout.strides(), |o, i, w, d| {
+            if self.included[origin + i] {
+                keep(w, d);
+                offsets[nodes] = o;
+                nodes += 1;
+            }
+        });
         let mut near = NearPoints::NONE;
         self.scan_points(layout, x, |b, w, d| {
             keep(w, d);
@@ -603,7 +673,7 @@ impl<const D: usize> AugmentedGrid<D> {
             self.for_each_near(layout, x, &near, |_, w, d| m.add(w, &d));
             (Tilt::none(), m)
         } else {
-            centred_tilt::<D, Ops>(&points[..len], 1.0 / layout.h, total)
+            centred_tilt::<D, Ops>(&points[..len], &offsets[..nodes], &s.fx, 1.0 / layout.h, total)
         };
         let (minv, kind) = MlsInverse::from_moments::<Ops>(&m, layout.h);
         Ok((minv, kind, near, total, tilt))
@@ -860,5 +930,60 @@ mod tests {
             .expect("no plane moves");
         let contacts = vec![WallContact::from(crate::wall::WallCondition::Slip); 3];
         follow_and_compare(&layout, &mut region, &contacts, 120);
+    }
+
+    /// The stable transfer's reweighting in 3D, with the nodes' exponentials as products of per-axis
+    /// factors: every weight equals `Tilt::weight` to 1e-12 relative and the weights keep Σw; the
+    /// reweighted points of particles near the faces, edges and corners of a turned box have their first
+    /// moment at the particle (below 1e-10 h of Σw) unless the tilt was capped or the spread floor stopped
+    /// it (measured: 1,211 of 1,239 uncapped particles centred, as with the eigenvalue test before).
+    #[test]
+    fn the_3d_tilt_centres_the_points_with_factored_exponentials() {
+        use crate::geometry3::{Solid, Wall3, Walls3};
+        let layout = GridLayout::<3>::new(1.0 / 20.0, [20, 20, 20]);
+        let axes =
+            nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(Vector::<3>::new(1.0, 0.2, 0.6)), 0.3);
+        let tank = Solid::Box {
+            centre: Vector::<3>::new(0.5, 0.45, 0.5),
+            half: Vector::<3>::new(0.3, 0.25, 0.25),
+            axes: axes.into_inner(),
+        };
+        let region = Walls3::new(vec![Wall3 { solid: tank, side: Side::Inside }], Vector::<3>::new(1.0, 1.0, 1.0));
+        let contacts = vec![WallContact::from(crate::wall::WallCondition::Slip); 2];
+        let mut grid = AugmentedGrid::new(&layout, &region, layout.h, contacts, 0.1 * layout.h);
+        grid.transfer = AugmentedTransfer::Stable;
+        let (mut tested, mut centred, mut s) = (0, 0, 0x2545f4914f6cdd1du64);
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as Real / (1u64 << 53) as Real
+        };
+        for _ in 0..3000 {
+            let x = Vector::<3>::new(0.15 + 0.7 * next(), 0.15 + 0.6 * next(), 0.2 + 0.6 * next());
+            let inside = region.distance(&x).distance;
+            if inside >= -0.05 * layout.h || grid.takes_closed_form(&layout, &x, 0).unwrap() {
+                continue;
+            }
+            let (_, _, near, total, tilt) = grid.stable_inverse::<crate::math::Dim<3>>(&layout, &x, 0).unwrap();
+            if near.len == NearPoints::OVERFLOW || tilt.eta.norm() * layout.h >= TILT_MAX * (1.0 - 1e-9) {
+                continue;
+            }
+            let (mut sum, mut first) = (0.0, Vector::<3>::zeros());
+            grid.for_each_near_tilted(&layout, &x, &near, &tilt, |i, w, d| {
+                let plain = if i < grid.num_nodes() { crate::kernel::weight(&d, 1.0 / layout.h) } else { w };
+                if i < grid.num_nodes() {
+                    let direct = tilt.weight(plain, &d);
+                    assert!((w - direct).abs() <= 1e-12 * direct, "{w} against {direct}");
+                }
+                sum += w;
+                first += d * w;
+            });
+            assert!((sum - total).abs() < 1e-9 * total, "the tilt keeps Σw: {sum} against {total}");
+            centred += usize::from(first.norm() < 1e-10 * layout.h * total);
+            tested += 1;
+        }
+        assert!(tested > 1000, "only {tested} particles near a wall");
+        assert!(centred as f64 > 0.95 * tested as f64, "{centred} of {tested} centred");
     }
 }
