@@ -160,7 +160,21 @@ impl<const D: usize> Moments<D> {
     pub fn add(&mut self, w: Real, d: &Vector<D>) {
         self.a += w;
         self.b += d * w;
-        self.c += d * d.transpose() * w;
+        if D == 3 {
+            // The six distinct entries of w d dᵀ, from w d (in 2D the sums stay as they were).
+            let dw = d * w;
+            for i in 0..D {
+                for j in i..D {
+                    let v = dw[i] * d[j];
+                    self.c[(i, j)] += v;
+                    if j != i {
+                        self.c[(j, i)] += v;
+                    }
+                }
+            }
+        } else {
+            self.c += d * d.transpose() * w;
+        }
     }
 }
 

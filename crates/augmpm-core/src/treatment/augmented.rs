@@ -567,22 +567,29 @@ impl<const D: usize> AugmentedGrid<D> {
         let reach = 1.5 * layout.h;
         let lo: [i64; D] = std::array::from_fn(|k| floor_i64((x[k] - reach) * inv_h));
         let hi: [i64; D] = std::array::from_fn(|k| floor_i64((x[k] + reach) * inv_h));
-        let span: [usize; D] = std::array::from_fn(|k| (hi[k] - lo[k] + 1) as usize);
-        let total: usize = span.iter().product();
-        for k in 0..total {
-            let mut c = lo;
-            let mut r = k;
-            for (a, ck) in c.iter_mut().enumerate() {
-                *ck += (r % span[a]) as i64;
-                r /= span[a];
+        // The cells from `lo` to `hi`, the first axis fastest (an odometer: no division per cell).
+        let mut c = lo;
+        loop {
+            if let Some(cell) = layout.node_index(&c) {
+                let range = self.cell_start[cell] as usize..self.cell_start[cell + 1] as usize;
+                for &b in &self.cell_points[range] {
+                    let d = self.points[b as usize].x - x;
+                    let w = weight(&d, inv_h);
+                    if w > 0.0 {
+                        f(b, w, d);
+                    }
+                }
             }
-            let Some(cell) = layout.node_index(&c) else { continue };
-            let range = self.cell_start[cell] as usize..self.cell_start[cell + 1] as usize;
-            for &b in &self.cell_points[range] {
-                let d = self.points[b as usize].x - x;
-                let w = weight(&d, inv_h);
-                if w > 0.0 {
-                    f(b, w, d);
+            let mut a = 0;
+            loop {
+                c[a] += 1;
+                if c[a] <= hi[a] {
+                    break;
+                }
+                c[a] = lo[a];
+                a += 1;
+                if a == D {
+                    return;
                 }
             }
         }
