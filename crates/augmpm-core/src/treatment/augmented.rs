@@ -4,7 +4,7 @@
 //! the included nodes and boundary points in its B-spline support.
 
 use crate::geometry::Region;
-use crate::grid::{GridLayout, OutOfGrid};
+use crate::grid::{GridLayout, OutOfGrid, GHOST};
 use crate::kernel::{weight, MlsInverse, MlsKind, Moments, Stencil};
 use crate::math::{floor_i64, DimOps, Real, Vector};
 use crate::wall::{BoundaryPoint, WallContact};
@@ -567,11 +567,19 @@ impl<const D: usize> AugmentedGrid<D> {
         let reach = 1.5 * layout.h;
         let lo: [i64; D] = std::array::from_fn(|k| floor_i64((x[k] - reach) * inv_h));
         let hi: [i64; D] = std::array::from_fn(|k| floor_i64((x[k] + reach) * inv_h));
-        // The cells from `lo` to `hi`, the first axis fastest (an odometer: no division per cell).
+        // The cells from `lo` to `hi`, the first axis fastest, row by row along it: a row's cells are
+        // consecutive, so its points are one range of `cell_points` (the same points in the same order
+        // as cell by cell). The rows are counted by an odometer over the other axes.
+        let (first, last) = (lo[0].max(-GHOST), hi[0].min(layout.dims[0] as i64 - 1 - GHOST));
+        if first > last {
+            return;
+        }
         let mut c = lo;
+        c[0] = first;
         loop {
             if let Some(cell) = layout.node_index(&c) {
-                let range = self.cell_start[cell] as usize..self.cell_start[cell + 1] as usize;
+                let end = cell + (last - first) as usize + 1;
+                let range = self.cell_start[cell] as usize..self.cell_start[end] as usize;
                 for &b in &self.cell_points[range] {
                     let d = self.points[b as usize].x - x;
                     let w = weight(&d, inv_h);
@@ -580,7 +588,10 @@ impl<const D: usize> AugmentedGrid<D> {
                     }
                 }
             }
-            let mut a = 0;
+            let mut a = 1;
+            if a == D {
+                return;
+            }
             loop {
                 c[a] += 1;
                 if c[a] <= hi[a] {
