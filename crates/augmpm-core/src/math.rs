@@ -167,6 +167,15 @@ pub fn heap_bytes<T>(v: &Vec<T>) -> usize {
     v.capacity() * std::mem::size_of::<T>()
 }
 
+/// Resizes `v` to `len` entries (new ones `value`), growing its allocation, when it must, to `len` and an
+/// eighth more rather than doubling it: per-step tables whose length drifts keep about their size.
+pub fn resize_with_margin<T: Clone>(v: &mut Vec<T>, len: usize, value: T) {
+    if len > v.capacity() {
+        v.reserve_exact(len + len / 8 - v.len());
+    }
+    v.resize(len, value);
+}
+
 /// Number of nodes in the 3^D stencil of the quadratic B-spline.
 pub const fn stencil_len(d: usize) -> usize {
     3usize.pow(d as u32)

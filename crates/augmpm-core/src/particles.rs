@@ -64,6 +64,18 @@ pub enum ColumnMut<'a, const D: usize> {
     Index(&'a mut Vec<u32>),
 }
 
+impl<const D: usize> ColumnMut<'_, D> {
+    /// Gives back the allocation beyond the column's length.
+    pub fn shrink_to_fit(&mut self) {
+        match self {
+            ColumnMut::Vector(a) => a.shrink_to_fit(),
+            ColumnMut::Matrix(a) => a.shrink_to_fit(),
+            ColumnMut::Real(a) => a.shrink_to_fit(),
+            ColumnMut::Index(a) => a.shrink_to_fit(),
+        }
+    }
+}
+
 impl<'a, const D: usize> Column<'a, D> {
     pub fn len(&self) -> usize {
         match self {

@@ -168,6 +168,9 @@ impl<const D: usize> State<D> {
     /// The state of `particles` at rest before the first step: time 0, not binned.
     pub fn new(particles: Particles<D>) -> Self {
         let n = particles.len();
+        // Seeding grew the columns by doubling: keep what the particles take.
+        let mut particles = particles;
+        particles.columns_mut().iter_mut().for_each(ColumnMut::shrink_to_fit);
         Self {
             step: 0,
             time: 0.0,

@@ -479,7 +479,7 @@ where
 {
     let layout = t.layout;
     pushes.clear();
-    pushes.resize(t.augmented.map_or(0, |(_, table)| table.len()), WallPush::none());
+    crate::math::resize_with_margin(pushes, t.augmented.map_or(0, |(_, table)| table.len()), WallPush::none());
     let pushes = Disjoint::new(pushes);
     let (h, inv_h) = (layout.h, 1.0 / layout.h);
     let apic = 4.0 * inv_h * inv_h;

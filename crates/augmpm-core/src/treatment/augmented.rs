@@ -6,6 +6,7 @@
 use crate::geometry::Region;
 use crate::grid::{GridLayout, OutOfGrid, GHOST};
 use crate::kernel::{weight, MlsInverse, MlsKind, Moments, Stencil};
+use crate::math::resize_with_margin;
 use crate::math::{floor_i64, DimOps, Real, Vector};
 use crate::wall::{BoundaryPoint, WallContact};
 use schemars::JsonSchema;
@@ -790,18 +791,19 @@ impl<const D: usize> WallParticles<D> {
             },
         )?;
         // Entries in particle order (a serial pass: a few ns per particle).
-        self.particle.clear();
+        let m = self.slot.par_iter().with_min_len(min_task).filter(|&&s| s != Self::NONE).count();
+        resize_with_margin(&mut self.particle, m, 0);
+        let mut next = 0;
         for (p, slot) in self.slot.iter_mut().enumerate() {
             if *slot != Self::NONE {
-                *slot = self.particle.len() as u32;
-                self.particle.push(p as u32);
+                (*slot, self.particle[next]) = (next as u32, p as u32);
+                next += 1;
             }
         }
-        let m = self.particle.len();
-        self.minv.resize(m, MlsInverse::regular(layout.h));
-        self.near.resize(m, NearPoints::NONE);
-        self.total.resize(m, 0.0);
-        self.tilt.resize(m, Tilt::none());
+        resize_with_margin(&mut self.minv, m, MlsInverse::regular(layout.h));
+        resize_with_margin(&mut self.near, m, NearPoints::NONE);
+        resize_with_margin(&mut self.total, m, 0.0);
+        resize_with_margin(&mut self.tilt, m, Tilt::none());
         let stable = grid.transfer == AugmentedTransfer::Stable;
         self.minv
             .par_iter_mut()
