@@ -32,6 +32,10 @@ _WALLS = [
     {"type": "polygon", "vertices": [[0.05, 0.05], [0.95, 0.05], [0.95, 0.95], [0.05, 0.95]]},
     {"type": "circle", "center": [0.8, 0.8], "radius": 0.05},
 ]
+_RIGID = [
+    {"shape": "polygon", "vertices": [[0.6, 0.2], [0.7, 0.2], [0.7, 0.3], [0.6, 0.3]], "density": 500.0},
+    {"shape": "circle", "center": [0.2, 0.8], "radius": 0.05, "mass": 2.0},
+]
 
 
 def _scenes() -> list[dict[str, Any]]:
@@ -45,6 +49,7 @@ def _scenes() -> list[dict[str, Any]]:
                 "time": {"dt": 1e-4, "steps": 2, "output_interval": 1},
                 "walls": copy.deepcopy(_WALLS),
                 "bodies": [{**copy.deepcopy(body), "material": dict(material), "seeding": {"per_cell": 4}}],
+                "rigid_bodies": copy.deepcopy(_RIGID),
             }
         )
     return scenes

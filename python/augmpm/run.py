@@ -1,8 +1,9 @@
 """A whole run: simulate a scene and write every output into a directory.
 
 Layout of DIR: ``scene.toml`` (the resolved scene), ``metrics.csv`` (one row per
-output frame: :data:`METRIC_COLUMNS`, then the force on each wall, :func:`wall_force_columns`),
-``particles/frame_00000.npz`` (``x``, ``v``, ``body``),
+output frame: :data:`METRIC_COLUMNS`, then the force on each wall, :func:`wall_force_columns`, then each
+rigid body's state, :func:`rigid_body_columns`), ``bodies.csv`` (with rigid bodies: one row per frame and
+body, :data:`BODY_COLUMNS`), ``particles/frame_00000.npz`` (``x``, ``v``, ``body``; ``rigid_bodies``),
 ``frames/frame_00000.png``, ``vtk/frame_00000.vtp`` with ``particles.pvd`` (and the walls: ``vtk/walls/walls.vtp``,
 or per frame ``vtk/walls/frame_00000.vtp`` with ``walls.pvd`` when walls move),
 ``animation.mp4`` (or ``.gif``), and ``checkpoint.npz`` (the state at the last
@@ -58,6 +59,19 @@ def wall_force_columns(walls: int, dim: int = 2) -> list[str]:
     over the output interval that ends at the row (0 in the first row); ``dim`` components each."""
     names = [*map(str, range(walls)), "box"]
     return [f"wall_force_{w}_{axis}" for w in names for axis in ("x", "y", "z")[:dim]]
+
+
+#: What ``bodies.csv`` holds of each rigid body at each frame (2D): its centre of mass (m), its turn from
+#: where the scene draws it (rad, counter-clockwise), their rates (m/s, rad/s), and the mean force (N per
+#: metre of depth) and torque about its centre of mass (N·m per metre) the material put on it over the
+#: output interval that ends at the row (0 in the first row).
+BODY_COLUMNS = ["x", "y", "angle", "vx", "vy", "angular_velocity", "force_x", "force_y", "torque"]
+
+
+def rigid_body_columns(bodies: int) -> list[str]:
+    """The columns of ``metrics.csv`` after the wall forces: ``rigid_<k>_<c>`` for each of ``bodies`` rigid
+    bodies and each column ``c`` of :data:`BODY_COLUMNS`."""
+    return [f"rigid_{k}_{c}" for k in range(bodies) for c in BODY_COLUMNS]
 
 
 CHECKPOINT = "checkpoint.npz"
@@ -207,8 +221,11 @@ class _Run:
         self.walls_move_3d = sim.dim == 3 and any(getattr(w, "motion", None) is not None for w in sim.scene.walls)
         self.walls = any(moving for _, moving in outlines) or self.walls_move_3d
         self.columns = METRIC_COLUMNS + wall_force_columns(len(sim.wall_impulse) - 1, sim.dim)
-        # The walls' impulses at the last row, from which the next row's forces are measured.
+        self.bodies = len(getattr(sim.scene, "rigid_bodies", []))
+        self.columns += rigid_body_columns(self.bodies)
+        # The walls' impulses (and their moments) at the last row, from which the next row's forces are measured.
         self.impulse_at = (sim.wall_impulse.copy(), sim.time)
+        self.angular_at = sim.wall_angular_impulse.copy()
         self.wall_frames = [(t, f.replace("vtk/", "vtk/walls/")) for t, f in self.vtk_frames] if self.walls else []
         if (outlines or sim.dim == 3) and not self.walls:
             (out / "vtk" / "walls").mkdir(parents=True, exist_ok=True)
@@ -284,9 +301,10 @@ class _Run:
         sim, out = self.sim, self.out
         x, v, body = sim.positions, sim.velocities, sim.body
         name = f"frame_{self.frame:05d}"
-        write_npz(
-            out / "particles" / f"{name}.npz", {"x": x, "v": v, "body": body, "time": sim.time, "step": sim.steps_done}
-        )
+        arrays = {"x": x, "v": v, "body": body, "time": sim.time, "step": sim.steps_done}
+        if self.bodies:
+            arrays["rigid_bodies"] = sim.rigid_bodies
+        write_npz(out / "particles" / f"{name}.npz", arrays)
         write_vtp(out / "vtk" / f"{name}.vtp", x, {"velocity": v, "body": body})
         self.vtk_frames.append((sim.time, f"vtk/{name}.vtp"))
         write_pvd(out / "particles.pvd", self.vtk_frames)
@@ -305,7 +323,10 @@ class _Run:
         row = {k: m[k] for k in METRIC_COLUMNS}
         impulse, (last, since) = sim.wall_impulse, self.impulse_at
         force = -(impulse - last) / (sim.time - since) if sim.time > since else np.zeros_like(impulse)
-        row |= dict(zip(self.columns[len(METRIC_COLUMNS) :], map(float, force.ravel()), strict=True))
+        forces = self.columns[len(METRIC_COLUMNS) : len(self.columns) - len(rigid_body_columns(self.bodies))]
+        row |= dict(zip(forces, map(float, force.ravel()), strict=True))
+        if self.bodies:
+            row |= self._body_columns(impulse - last, sim.time - since, force)
         self.impulse_at = (impulse, sim.time)
         self.pending.append((row, png))
         checkpoint = self.every and self.frame % self.every == 0
@@ -314,6 +335,22 @@ class _Run:
         if checkpoint:
             meta = {**self.meta, "frame": self.frame, "done": self.done}
             save_checkpoint(out / CHECKPOINT, sim, meta)
+
+    def _body_columns(self, impulse: np.ndarray, interval: float, force: np.ndarray) -> dict[str, float]:
+        """Each rigid body's row entries: its state now, and the mean force and torque the material put on
+        it over the last ``interval`` (s), in which its wall gave the material ``impulse`` (per wall)."""
+        sim, first = self.sim, len(self.sim.scene.walls)
+        angular = sim.wall_angular_impulse
+        moment = angular - self.angular_at
+        self.angular_at = angular
+        row = {}
+        for k, state in enumerate(sim.rigid_bodies):
+            w = first + k
+            (cx, cy), (jx, jy) = state[:2], impulse[w]
+            torque = -(moment[w] - (cx * jy - cy * jx)) / interval if interval > 0 else 0.0
+            values = [*map(float, state), float(force[w, 0]), float(force[w, 1]), float(torque)]
+            row |= {f"rigid_{k}_{c}": v for c, v in zip(BODY_COLUMNS, values, strict=True)}
+        return row
 
     def commit(self, wait: bool = False, rewrite: bool = False) -> None:
         """Writes ``metrics.csv`` with the rows of every frame whose files are all written (waiting
@@ -331,6 +368,19 @@ class _Run:
             writer.writeheader()
             writer.writerows(self.rows)
             write_text(self.out / "metrics.csv", buf.getvalue())
+            if self.bodies:
+                self._write_bodies()
+
+    def _write_bodies(self) -> None:
+        """``bodies.csv``: the rigid bodies' columns of the committed rows, one row per frame and body."""
+        buf = io.StringIO()
+        writer = csv.DictWriter(buf, fieldnames=["frame", "step", "time", "body", *BODY_COLUMNS], lineterminator="\r\n")
+        writer.writeheader()
+        for frame, row in enumerate(self.rows):
+            for k in range(self.bodies):
+                state = {c: row[f"rigid_{k}_{c}"] for c in BODY_COLUMNS}
+                writer.writerow({"frame": frame, "step": row["step"], "time": row["time"], "body": k, **state})
+        write_text(self.out / "bodies.csv", buf.getvalue())
 
 
 def save_checkpoint(path: Path, sim: Simulation, meta: dict) -> None:

@@ -224,6 +224,22 @@ class Simulation:
         ``wall_force_<i>_x``)."""
         return self._sim.wall_impulse
 
+    @property
+    def wall_angular_impulse(self) -> np.ndarray:
+        """The moment about the origin of each row of :attr:`wall_impulse`, ``Σ x × Δp`` over where it was
+        given (N·m·s per metre of depth in 2D, about z, shape (walls + 1,); N·m·s in 3D, shape (walls + 1, 3)).
+        The torque on a wall about a point c over an interval is minus the change of its row less
+        c × the change of its impulse, over the interval."""
+        return self._sim.wall_angular_impulse
+
+    @property
+    def rigid_bodies(self) -> np.ndarray:
+        """Each of the scene's ``rigid_bodies`` now, one row per body: ``x, y, angle, vx, vy,
+        angular_velocity`` (its centre of mass (m), its turn from where the scene draws it (rad,
+        counter-clockwise) and their rates (m/s, rad/s)). Its wall is ``len(scene.walls) + k`` in
+        :attr:`wall_impulse`."""
+        return self._sim.rigid_bodies
+
     def metrics(self) -> dict[str, float]:
         """``step, time, kinetic_energy, n_outside, max_penetration`` (cell widths), the augmented
         grid's counters ``ill_conditioned, low_mass_nodes, held_at_wall``, and ``max_cfl``: the
@@ -234,8 +250,13 @@ class Simulation:
 # Dtypes of the arrays of a checkpoint, from the engine's table of per-particle fields (see
 # Simulation.checkpoint); the rest are scalars.
 _STATE_DTYPES = {f["name"]: np.dtype(f["dtype"]) for f in _core.state_fields()}
-# The walls' part of the state: each wall's impulse so far, and the poses set by set_wall_pose.
-_STATE_DTYPES |= {"wall_impulse": np.dtype("float64"), "wall_pose": np.dtype("float64")}
+# The walls' part of the state: each wall's impulse so far and its moment, and the poses set by set_wall_pose
+# (the rigid bodies' among them).
+_STATE_DTYPES |= {
+    "wall_impulse": np.dtype("float64"),
+    "wall_angular_impulse": np.dtype("float64"),
+    "wall_pose": np.dtype("float64"),
+}
 
 
 def _number(key: str, value: Any) -> float:

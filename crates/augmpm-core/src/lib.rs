@@ -23,6 +23,7 @@ pub mod mesh;
 pub mod motion;
 pub mod parallel;
 pub mod particles;
+pub mod rigid;
 pub mod scene;
 pub mod scene3;
 pub mod schema;

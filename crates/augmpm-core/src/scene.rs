@@ -5,8 +5,9 @@ use crate::geometry::{Circle, Point, Polygon, Region, Side, Stroke, SurfaceMotio
 use crate::grid::GridLayout;
 use crate::material::Material;
 use crate::math::{Precision, Real};
-use crate::motion::Motion;
+use crate::motion::{Motion, WallPose};
 use crate::particles::Particles;
+use crate::rigid::RigidBody;
 use crate::simulation::{Model, Simulation};
 use crate::treatment::augmented::{AugmentedGrid, AugmentedTransfer};
 use crate::treatment::naive::NaiveBoundary;
@@ -294,6 +295,87 @@ pub struct BodySpec {
     pub fill: bool,
 }
 
+/// The shape of a rigid body: a solid polygon or disk (the material stays outside it).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(tag = "shape", rename_all = "lowercase")]
+pub enum RigidShape {
+    /// A simple polygon.
+    #[schemars(title = "PolygonRigidBody")]
+    Polygon {
+        /// Corners, counter-clockwise; the first may be repeated at the end.
+        #[schemars(length(min = 3), extend("unit" = "m", "unbounded" = true))]
+        vertices: Vec<[Real; 2]>,
+    },
+    /// A disk.
+    #[schemars(title = "CircleRigidBody")]
+    Circle {
+        /// Centre.
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
+        center: [Real; 2],
+        /// Radius.
+        #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "m"))]
+        radius: Real,
+    },
+}
+
+/// A rigid body that the material pushes and that pushes it back: a solid shape of uniform density whose
+/// surface is a moving wall; gravity and the impulse of its wall conditions move it. Bodies do not yet
+/// meet each other or the scene's walls.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct RigidBodySpec {
+    #[serde(flatten)]
+    pub shape: RigidShape,
+    /// Density (kg/m², per metre of depth); give it or `mass`.
+    #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "kg/m²"))]
+    pub density: Option<Real>,
+    /// Mass (kg per metre of depth); give it or `density`.
+    #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "kg/m"))]
+    pub mass: Option<Real>,
+    /// Initial velocity of its centre of mass.
+    #[serde(default)]
+    #[schemars(extend("unit" = "m/s", "unbounded" = true))]
+    pub velocity: [Real; 2],
+    /// Initial angular velocity, counter-clockwise.
+    #[serde(default)]
+    #[schemars(extend("unit" = "rad/s", "unbounded" = true))]
+    pub angular_velocity: Real,
+    /// Its surface's condition (default: the scene's `wall_condition`).
+    #[serde(default)]
+    pub condition: Option<WallCondition>,
+    /// Coulomb friction coefficient μ of a `separate` surface (default: the scene's `wall_friction`).
+    #[serde(default, with = "friction::optional")]
+    #[schemars(schema_with = "friction::optional_schema")]
+    pub friction: Option<Real>,
+}
+
+impl RigidBodySpec {
+    /// Its wall as drawn, its mass (kg/m), polar inertia about its centre of mass (kg·m²/m) and its centre
+    /// of mass (m); an error names `key` for a polygon that is not simple and counter-clockwise, or
+    /// neither or both of `density` and `mass`.
+    fn solid(&self, key: &str) -> Result<(WallShape, Real, Real, Point), SceneError> {
+        let (shape, area, polar, centre) = match &self.shape {
+            RigidShape::Polygon { vertices } => {
+                let poly = checked_polygon(&format!("{key}.vertices"), vertices.iter().map(point).collect())?;
+                let (area, centre, polar) = crate::rigid::polygon_moments(&poly.vertices);
+                (WallShape::Obstacle(poly), area, polar, centre)
+            }
+            RigidShape::Circle { center, radius } => {
+                let area = crate::math::PI * radius * radius;
+                let circle = Circle { center: point(center), radius: *radius };
+                (WallShape::Circle(circle, Side::Outside), area, 0.5 * area * radius * radius, point(center))
+            }
+        };
+        let density = match (self.density, self.mass) {
+            (Some(rho), None) => rho,
+            (None, Some(m)) => m / area,
+            _ => return Err(SceneError::new(key, "give exactly one of density and mass")),
+        };
+        Ok((shape, density * area, density * polar, centre))
+    }
+}
+
 /// A scene: the grid, time stepping, walls and bodies, and how walls act on the grid.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -332,6 +414,10 @@ pub struct Scene {
     /// studied on their own (`augmpm._core.Grid`).
     #[serde(default)]
     pub bodies: Vec<BodySpec>,
+    /// Rigid bodies the material pushes and that push it back; their walls follow the scene's walls
+    /// (wall `len(walls) + k` is `rigid_bodies[k]`).
+    #[serde(default)]
+    pub rigid_bodies: Vec<RigidBodySpec>,
     /// Settings of the augmented grid (`method = "augmented"`).
     #[serde(default)]
     pub augmented: AugmentedSpec,
@@ -770,9 +856,23 @@ impl Scene {
             conditions.push(self.contact(condition.unwrap_or(self.wall_condition), w.friction(), w.motion().is_some()));
             motions.push(SurfaceMotion { velocity: point(velocity), tangential_speed: speed, center });
         }
+        let mut moves: Vec<Option<Motion>> = self.walls.iter().map(|w| w.motion().cloned()).collect();
+        // The rigid bodies: solids moving at their initial velocities about their centres of mass until
+        // the engine poses them.
+        for (k, body) in self.rigid_bodies.iter().enumerate() {
+            let key = format!("rigid_bodies[{k}]");
+            let (shape, _, _, centre) = body.solid(&key)?;
+            shapes.push(shape);
+            conditions.push(self.contact(body.condition.unwrap_or(self.wall_condition), body.friction, true));
+            motions.push(SurfaceMotion { velocity: Point::zeros(), tangential_speed: 0.0, center: None });
+            moves.push(Some(Motion::Constant {
+                velocity: body.velocity,
+                angular_velocity: body.angular_velocity,
+                pivot: Some([centre.x, centre.y]),
+            }));
+        }
         // The domain box, always a wall, still.
         conditions.push(self.contact(self.wall_condition, None, false));
-        let moves = self.walls.iter().map(|w| w.motion().cloned()).collect();
         Ok((Walls2::new(shapes, extent).with_motions(motions).with_moves(moves), conditions))
     }
 
@@ -784,7 +884,15 @@ impl Scene {
         fastest: Option<(usize, Real)>,
         h: Real,
     ) -> Result<(Real, Option<String>), SceneError> {
-        time_step(&self.time, model_stable_dt, fastest, h)
+        time_step(&self.time, model_stable_dt, fastest, h).map_err(|e| {
+            // A rigid body's wall follows the scene's: name the body.
+            match fastest.filter(|&(wall, _)| wall >= self.walls.len() && e.key == format!("walls[{wall}].motion")) {
+                Some((wall, _)) => {
+                    SceneError::new(format!("rigid_bodies[{}].velocity", wall - self.walls.len()), e.reason)
+                }
+                None => e,
+            }
+        })
     }
 
     /// The grid, the material region and the walls' boundary handling, without bodies.
@@ -917,6 +1025,13 @@ impl Scene {
             && materials.iter().any(crate::material::ConstitutiveModel::<2>::needs_grid_density))
         .then(|| crate::step::transfer::wall_fractions(&layout, &region));
         let fastest = region.fastest();
+        let mut bodies = Vec::new();
+        for (k, spec) in self.rigid_bodies.iter().enumerate() {
+            let (_, mass, polar, centre) = spec.solid(&format!("rigid_bodies[{k}]"))?;
+            let mut inertia = crate::math::Matrix::<3>::zeros();
+            inertia[(2, 2)] = polar;
+            bodies.push(RigidBody { wall: self.walls.len() + k, mass, inertia, centre });
+        }
         let mut model = Model {
             layout,
             materials,
@@ -925,6 +1040,7 @@ impl Scene {
             boundary,
             wall_fraction,
             dt: 0.0,
+            bodies,
         };
         let (dt, warning) = self.dt(model.stable_dt(), fastest, h)?;
         model.dt = dt;
@@ -936,7 +1052,13 @@ impl Scene {
                     .to_string(),
             );
         }
-        Ok((Simulation::new(model, particles), warnings))
+        let mut sim = Simulation::new(model, particles);
+        // Each rigid body's wall is posed by the engine from the start, at its initial velocities.
+        for (body, spec) in sim.model.bodies.iter().zip(&self.rigid_bodies) {
+            let pose = WallPose::planar(0.0, [0.0, 0.0], 0.0, spec.velocity, spec.angular_velocity);
+            sim.state.wall_poses.push((body.wall, pose));
+        }
+        Ok((sim, warnings))
     }
 }
 

@@ -797,6 +797,7 @@ impl Scene3 {
             boundary,
             wall_fraction: None,
             dt: 0.0,
+            bodies: Vec::new(),
         };
         let (dt, warning) = time_step(&self.time, model.stable_dt(), fastest, h)?;
         model.dt = dt;

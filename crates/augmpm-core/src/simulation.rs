@@ -9,11 +9,13 @@ use crate::math::{Dim, DimOps, Real, Vector};
 use crate::motion::WallPose;
 use crate::parallel::Disjoint;
 use crate::particles::{Column, ColumnMut, Field, FieldKind, Particles};
+use crate::rigid::RigidBody;
 use crate::step::schedule::{Binning, Schedule};
 use crate::step::transfer::{self, G2pOutcome, GridDensity, Transfer};
 use crate::treatment::augmented::WallParticles;
 use crate::treatment::wall_fit::WallPush;
 use crate::treatment::{Boundary, WallTreatment};
+use crate::wall::WallImpulses;
 use std::time::Instant;
 
 /// Everything fixed during a run: grid, materials, gravity, walls.
@@ -30,6 +32,8 @@ pub struct Model<const D: usize> {
     pub wall_fraction: Option<Vec<Real>>,
     /// Time step (s).
     pub dt: Real,
+    /// The rigid bodies, each moving one of the region's walls.
+    pub bodies: Vec<RigidBody<D>>,
 }
 
 impl<const D: usize> Model<D>
@@ -80,15 +84,18 @@ pub enum StepError {
     NonFinite { step: u64, particle: usize, cause: String },
     #[error("step {step}: particle {particle} moved {cells:.3} cell widths in one step (at most {MAX_CELLS_PER_STEP} is allowed): the explicit step is unstable; {cause}")]
     Unstable { step: u64, particle: usize, cells: Real, cause: String },
+    #[error("step {step}: rigid_bodies[{body}] would move {cells:.3} cell widths in one step (at most one): the material or gravity sped it up beyond what time.dt follows; lower time.dt or time.cfl")]
+    BodyTooFast { step: u64, body: usize, cells: Real },
 }
 
 impl StepError {
-    /// The step and the particle the error names.
-    pub fn location(&self) -> (u64, usize) {
+    /// The step and the particle the error names (none for a body).
+    pub fn location(&self) -> (u64, Option<usize>) {
         match *self {
             StepError::LeftGrid { step, particle, .. }
             | StepError::NonFinite { step, particle, .. }
-            | StepError::Unstable { step, particle, .. } => (step, particle),
+            | StepError::Unstable { step, particle, .. } => (step, Some(particle)),
+            StepError::BodyTooFast { step, .. } => (step, None),
         }
     }
 }
@@ -141,6 +148,9 @@ pub struct State<const D: usize> {
     /// domain box last): what the wall conditions took from or gave to the grid points and, at walls,
     /// to the particles. Empty before a simulation sizes it.
     pub wall_impulse: Vec<Vector<D>>,
+    /// The moment of those impulses about the origin, `Σ x × Δp` (N·m·s, per metre in 2D; 3 components,
+    /// in 2D only z), by wall as `wall_impulse`. Empty before a simulation sizes it.
+    pub wall_angular_impulse: Vec<Vector<3>>,
     /// The poses set by [`Simulation::set_wall_pose`], by wall (sorted); the other walls move as their
     /// scene says.
     pub wall_poses: Vec<(usize, WallPose<D>)>,
@@ -182,6 +192,7 @@ impl<const D: usize> State<D> {
             density: vec![0.0; n],
             binning: Binning { bins: vec![0; n], drift: Real::INFINITY },
             wall_impulse: Vec::new(),
+            wall_angular_impulse: Vec::new(),
             wall_poses: Vec::new(),
         }
     }
@@ -253,6 +264,9 @@ impl<const D: usize> State<D> {
         if self.wall_impulse.iter().any(|i| !i.iter().all(|a| a.is_finite())) {
             return Err("wall_impulse holds non-finite values".to_string());
         }
+        if self.wall_angular_impulse.iter().any(|i| !i.iter().all(|a| a.is_finite())) {
+            return Err("wall_angular_impulse holds non-finite values".to_string());
+        }
         if let Some((w, _)) = self.wall_poses.iter().find(|(_, p)| !p.to_row().iter().all(|a| a.is_finite())) {
             return Err(format!("wall_pose of wall {w} holds non-finite values"));
         }
@@ -278,6 +292,8 @@ struct Scratch<const D: usize> {
     walls: WallParticles<D>,
     /// The impulse each wall gave each particle of `walls` in G2P.
     pushes: Vec<WallPush<D>>,
+    /// What the walls gave the material in this step.
+    step_impulse: WallImpulses<D>,
 }
 
 impl<const D: usize> Scratch<D> {
@@ -442,6 +458,7 @@ where
             smooths: model.materials.iter().map(ConstitutiveModel::<D>::smooths_volume_ratio).collect(),
             walls: WallParticles::default(),
             pushes: Vec::new(),
+            step_impulse: WallImpulses::zeros(model.boundary.contacts().len()),
         };
         let mut model = model;
         if model.region.moves() {
@@ -449,6 +466,7 @@ where
         }
         let mut state = State::new(particles);
         state.wall_impulse = vec![Vector::<D>::zeros(); model.boundary.contacts().len()];
+        state.wall_angular_impulse = vec![Vector::<3>::zeros(); model.boundary.contacts().len()];
         Self { model, state, scratch, times: StageTimes::default(), pool: None, failed: None }
     }
 
@@ -565,6 +583,12 @@ where
                 state.wall_impulse.len()
             ));
         }
+        if !state.wall_angular_impulse.is_empty() && state.wall_angular_impulse.len() != walls {
+            return Err(format!(
+                "wall_angular_impulse has {} rows; the scene has {walls} walls (the domain box counted)",
+                state.wall_angular_impulse.len()
+            ));
+        }
         if let Some((w, _)) = state.wall_poses.iter().find(|(w, _)| *w + 1 >= walls) {
             return Err(format!("wall_pose names wall {w}; the scene has {} walls", walls - 1));
         }
@@ -581,6 +605,9 @@ where
         if state.wall_impulse.is_empty() {
             // A checkpoint written before walls' impulses were kept: none counted so far.
             state.wall_impulse = vec![Vector::<D>::zeros(); walls];
+        }
+        if state.wall_angular_impulse.is_empty() {
+            state.wall_angular_impulse = vec![Vector::<3>::zeros(); walls];
         }
         let was_moving = self.model.region.moves();
         self.state = state;
@@ -626,7 +653,7 @@ where
             model.boundary.prepare::<Dim<D>>(layout, &state.particles.x, &mut scratch.walls).map_err(left)?;
         lap.add_to(&mut times.boundary);
 
-        let Scratch { schedule, grid, density_mass, volume_ratio, walls, pushes, .. } = scratch;
+        let Scratch { schedule, grid, density_mass, volume_ratio, walls, pushes, step_impulse, .. } = scratch;
         let t = Transfer { layout, schedule, augmented: model.boundary.transfer_view(walls) };
         let grid_density = (!density_mass.is_empty() || !volume_ratio.is_empty()).then(|| GridDensity {
             grid_mass: density_mass,
@@ -638,7 +665,8 @@ where
         lap.add_to(&mut times.p2g);
         // 5. Grid update (momentum → velocity, gravity), then the walls' conditions.
         state.low_mass_nodes += transfer::grid_velocity(&t, grid, &model.gravity, dt) as u64;
-        model.boundary.apply(layout, model.region.as_ref(), &grid.mass, &mut grid.momentum, &mut state.wall_impulse);
+        step_impulse.clear();
+        model.boundary.apply(layout, model.region.as_ref(), &grid.mass, &mut grid.momentum, step_impulse);
         lap.add_to(&mut times.grid);
         // 6. G2P, advection and the deformation update (only materials that smooth their J read
         // it back from the density).
@@ -654,14 +682,24 @@ where
             pushes,
         );
         // In the table's order (the particles'), so that the sums do not depend on the threads.
-        for (wall, impulse) in pushes.iter().flat_map(WallPush::iter) {
-            state.wall_impulse[wall] += impulse;
+        for push in pushes.iter() {
+            for (wall, impulse) in push.iter() {
+                step_impulse.add(wall, &push.at, impulse);
+            }
+        }
+        for (total, step) in state.wall_impulse.iter_mut().zip(&step_impulse.linear) {
+            *total += step;
+        }
+        for (total, step) in state.wall_angular_impulse.iter_mut().zip(&step_impulse.angular) {
+            *total += step;
         }
         lap.add_to(&mut times.g2p);
 
         state.advance_clock(step, dt, outcome.max_move / layout.h, outcome.held_at_wall as u64);
         let failed = failure(step, &outcome, state.max_cfl, || likely_cause(model));
-        // 7. Moving walls go where they are at the end of the step; the treatment follows them.
+        // 7. The rigid bodies take the opposite of what their walls gave the material, and gravity.
+        let failed = failed.or_else(|| self.advance_bodies(step).err());
+        // 8. Moving walls go where they are at the end of the step; the treatment follows them.
         if moving {
             self.model.follow_walls(self.state.time, &self.state.wall_poses);
         }
@@ -676,6 +714,32 @@ where
         }
     }
 
+    /// Moves each rigid body from the start of the step that ended at [`Simulation::time`] to its end, from
+    /// what its wall gave the material over the step ([`RigidBody::advance`]); its wall pose is replaced.
+    /// Refused, changing nothing, if a body would move more than a cell in the next step.
+    fn advance_bodies(&mut self, step: u64) -> Result<(), StepError> {
+        let (dt, h) = (self.model.dt, self.model.layout.h);
+        let t = self.state.time - dt;
+        let mut next = Vec::with_capacity(self.model.bodies.len());
+        for (k, body) in self.model.bodies.iter().enumerate() {
+            let i =
+                self.state.wall_poses.binary_search_by_key(&body.wall, |&(w, _)| w).expect("a body's wall is posed");
+            let pose = &self.state.wall_poses[i].1;
+            let (linear, angular) =
+                (&self.scratch.step_impulse.linear[body.wall], &self.scratch.step_impulse.angular[body.wall]);
+            let moved = body.advance(pose, t, dt, &self.model.gravity, linear, angular);
+            let (_, speed) = self.model.region.pose_change(body.wall, &moved);
+            if speed * dt > h || speed.is_nan() {
+                return Err(StepError::BodyTooFast { step, body: k, cells: speed * dt / h });
+            }
+            next.push((i, moved));
+        }
+        for (i, pose) in next {
+            self.state.wall_poses[i].1 = pose;
+        }
+        Ok(())
+    }
+
     /// Sets wall `wall` (in scene order) where it is now, at [`Simulation::time`]: its pivot displaced
     /// by `pose.position` (m) from where the scene draws it, turned by `pose.angle` (rad), moving from
     /// now on at `pose.velocity` (m/s) and `pose.angular_velocity` (rad/s) until set again (`pose.time`
@@ -686,6 +750,9 @@ where
     pub fn set_wall_pose(&mut self, wall: usize, pose: WallPose<D>) -> Result<(), (&'static str, String)> {
         let pose = WallPose { time: self.state.time, ..pose };
         self.pose_refused(wall, &pose)?;
+        if let Some(k) = self.model.bodies.iter().position(|b| b.wall == wall) {
+            return Err(("wall", format!("wall {wall} is rigid_bodies[{k}], which the material moves")));
+        }
         let h = self.model.layout.h;
         let (jump, _) = self.model.region.pose_change(wall, &pose);
         if jump > h {
@@ -758,6 +825,34 @@ where
     /// the domain box last: minus what the material gave the wall.
     pub fn wall_impulse(&self) -> &[Vector<D>] {
         &self.state.wall_impulse
+    }
+
+    /// Each rigid body's centre of mass (m) and turn from where the scene draws it (a rotation vector, rad;
+    /// in 2D only z), and their rates (m/s, rad/s), now.
+    pub fn rigid_bodies(&self) -> Vec<(Vector<D>, [Real; 3], Vector<D>, [Real; 3])> {
+        self.model
+            .bodies
+            .iter()
+            .map(|body| {
+                let i = self.state.wall_poses.binary_search_by_key(&body.wall, |&(w, _)| w).expect("posed");
+                let pose = &self.state.wall_poses[i].1;
+                let s = self.state.time - pose.time;
+                let centre = body.centre + Vector::<D>::from_fn(|k, _| pose.position[k] + pose.velocity[k] * s);
+                let turn = if D == 2 {
+                    [0.0, 0.0, pose.angle[2] + pose.angular_velocity[2] * s]
+                } else {
+                    let spin = nalgebra::Rotation3::new(Vector::<3>::from(pose.angular_velocity) * s);
+                    (spin * nalgebra::Rotation3::new(Vector::<3>::from(pose.angle))).scaled_axis().into()
+                };
+                (centre, turn, Vector::<D>::from(pose.velocity), pose.angular_velocity)
+            })
+            .collect()
+    }
+
+    /// The moment about the origin of the impulse each wall has given the material since the start (N·m·s,
+    /// per metre in 2D; 3 components, in 2D only z), the domain box last.
+    pub fn wall_angular_impulse(&self) -> &[Vector<3>] {
+        &self.state.wall_angular_impulse
     }
 
     /// Density (kg/m³, or kg/m² in 2D) of each particle in the last step, as its material saw it

@@ -185,6 +185,42 @@ impl WallContact {
     }
 }
 
+/// The moment about the origin, `x × p` (3 components; in 2D only z), of `p` given at `x`.
+#[inline]
+pub fn moment<const D: usize>(x: &Vector<D>, p: &Vector<D>) -> Vector<3> {
+    let pad = |v: &Vector<D>| Vector::<3>::from_fn(|k, _| if k < D { v[k] } else { 0.0 });
+    pad(x).cross(&pad(p))
+}
+
+/// What the walls gave the material in one step, per wall (the domain box last): the impulse `Σ Δp`
+/// (N·s, per metre in 2D) and its moment about the origin `Σ x × Δp` (N·m·s), over the grid points
+/// (and, with the stable transfer's wall fit, the particles) where it was given.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct WallImpulses<const D: usize> {
+    pub linear: Vec<Vector<D>>,
+    pub angular: Vec<Vector<3>>,
+}
+
+impl<const D: usize> WallImpulses<D> {
+    /// Nothing given yet, for `walls` walls (the domain box counted).
+    pub fn zeros(walls: usize) -> Self {
+        Self { linear: vec![Vector::<D>::zeros(); walls], angular: vec![Vector::<3>::zeros(); walls] }
+    }
+
+    /// Wall `wall` gave `dp` at `x`.
+    #[inline]
+    pub fn add(&mut self, wall: usize, x: &Vector<D>, dp: Vector<D>) {
+        self.linear[wall] += dp;
+        self.angular[wall] += moment(x, &dp);
+    }
+
+    /// Back to nothing given, keeping the number of walls.
+    pub fn clear(&mut self) {
+        self.linear.fill(Vector::<D>::zeros());
+        self.angular.fill(Vector::<3>::zeros());
+    }
+}
+
 /// A point sampled on a wall, carrying the wall's outward normal(s).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BoundaryPoint<const D: usize> {

@@ -125,7 +125,7 @@ fn round_trip(s: &Setup, ps: &mut Particles<2>, walls_act: bool) -> GridState<2>
     let after_p2g = state.clone();
     grid_velocity(&t, &mut state, &Point::zeros(), 1e-3);
     if walls_act {
-        s.grid.apply(&state.mass, &mut state.momentum, &mut vec![Vector2::zeros(); s.grid.walls.len()]);
+        s.grid.apply(&state.mass, &mut state.momentum, &mut augmpm_core::wall::WallImpulses::zeros(s.grid.walls.len()));
         g2p(&t, &s.walls, &dust(), &state.momentum, &[], ps, 0.0, &mut Vec::new());
     } else {
         g2p(&t, &NoFeet(&s.walls), &dust(), &state.momentum, &[], ps, 0.0, &mut Vec::new());

@@ -138,6 +138,7 @@ fn model(layout: GridLayout<3>, region: Box<dyn Region<3>>, boundary: Boundary<3
         boundary,
         wall_fraction: None,
         dt: 0.0,
+        bodies: Vec::new(),
     };
     model.dt = 0.4 * model.stable_dt().min(0.2 * h / 3.0);
     model

@@ -2,7 +2,8 @@
 //! per-particle field of `State::fields`, float64 or uint32, shape (N, ...)) and scalars (one per
 //! `State::scalars`), and back. The field table of the core drives both directions, for any D and
 //! either precision. The walls' part of the state: `wall_impulse` (float64, (walls + 1, D): each wall's
-//! impulse on the material so far, the domain box last) and `wall_pose` (float64, (k, 8) in 2D, (k, 14)
+//! impulse on the material so far, the domain box last), `wall_angular_impulse` (float64, (walls + 1, 3):
+//! its moment about the origin; in 2D only z) and `wall_pose` (float64, (k, 8) in 2D, (k, 14)
 //! in 3D: per wall posed from outside, its index and `WallPose::names`); a checkpoint without them
 //! (written before they were kept) has no impulse counted and no posed wall.
 
@@ -61,6 +62,7 @@ macro_rules! state_conversions {
                     }
                 }
                 d.set_item("wall_impulse", crate::convert::vectors_to_array(py, &state.wall_impulse)?)?;
+                d.set_item("wall_angular_impulse", crate::convert::vectors_to_array(py, &state.wall_angular_impulse)?)?;
                 let poses: Vec<f64> = state
                     .wall_poses
                     .iter()
@@ -103,6 +105,14 @@ macro_rules! state_conversions {
                     state.wall_impulse = flat
                         .chunks(D)
                         .map(|c| $core::math::Vector::<D>::from_fn(|k, _| c[k] as $core::math::Real))
+                        .collect();
+                }
+                if dict.contains("wall_angular_impulse")? {
+                    let rows = rows_of::<f64>(dict, "wall_angular_impulse", "float64")?;
+                    let flat = array_of::<f64>(dict, "wall_angular_impulse", rows, &[3], "float64")?;
+                    state.wall_angular_impulse = flat
+                        .chunks(3)
+                        .map(|c| $core::math::Vector::<3>::from_fn(|k, _| c[k] as $core::math::Real))
                         .collect();
                 }
                 if dict.contains("wall_pose")? {

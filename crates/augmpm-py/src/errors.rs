@@ -29,7 +29,7 @@ pub fn scene_error(key: &str, reason: &str) -> PyErr {
 }
 
 /// `SimulationError(message)` with attributes `step` and `particle`, from either precision's error.
-pub fn simulation_error(e: impl std::fmt::Display, (step, particle): (u64, usize)) -> PyErr {
+pub fn simulation_error(e: impl std::fmt::Display, (step, particle): (u64, Option<usize>)) -> PyErr {
     Python::with_gil(|py| {
         let err = SimulationError::new_err(e.to_string());
         let value = err.value(py);

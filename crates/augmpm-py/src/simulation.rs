@@ -2,7 +2,7 @@
 //! `grid.domain` has three components), in the scene's precision; steps, arrays of the particles,
 //! metrics, checkpoints.
 
-use numpy::{PyArray1, PyArray2};
+use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -412,6 +412,47 @@ impl PySimulation {
     #[getter]
     fn wall_impulse<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         guard(|| with_sim!(&self.engine, s, core => vectors_to_array(py, s.wall_impulse())))
+    }
+
+    /// Each rigid body's state now, one row per body: in 2D `x, y, angle, vx, vy, angular_velocity` (its
+    /// centre of mass (m), its turn from where the scene draws it (rad, counter-clockwise) and their rates);
+    /// in 3D `x, y, z`, the turn as a rotation vector, the velocity and the angular velocity (12 columns).
+    #[getter]
+    fn rigid_bodies<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let dim = self.dim();
+        guard(|| {
+            with_sim!(&self.engine, s, core => {
+                let rows = s.rigid_bodies();
+                let turns = if dim == 2 { 2..3 } else { 0..3 };
+                let mut flat = Vec::new();
+                for (x, angle, v, w) in &rows {
+                    flat.extend(x.iter().map(|&a| crate::convert::wide(a)));
+                    flat.extend(angle[turns.clone()].iter().map(|&a| crate::convert::wide(a)));
+                    flat.extend(v.iter().map(|&a| crate::convert::wide(a)));
+                    flat.extend(w[turns.clone()].iter().map(|&a| crate::convert::wide(a)));
+                }
+                let columns = 2 * dim + 2 * turns.len();
+                Ok(PyArray1::from_vec(py, flat).reshape([rows.len(), columns])?)
+            })
+        })
+    }
+
+    /// The moment about the origin of the impulse each scene wall has given the material since the start
+    /// (N·m·s per metre of depth in 2D, N·m·s in 3D), shape (walls + 1,) in 2D (about z) and (walls + 1, 3)
+    /// in 3D, the domain box last; the torque a wall receives is minus its rate.
+    #[getter]
+    fn wall_angular_impulse<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        guard(|| {
+            with_sim!(&self.engine, s, core => {
+                let rows = s.wall_angular_impulse();
+                if self.dim() == 2 {
+                    let z: Vec<f64> = rows.iter().map(|a| crate::convert::wide(a[2])).collect();
+                    Ok(PyArray1::from_vec(py, z).into_any())
+                } else {
+                    vectors_to_array(py, rows).map(|a| a.into_any())
+                }
+            })
+        })
     }
 
     /// Step, time, kinetic energy, particles outside the walls, the deepest penetration (cell widths),

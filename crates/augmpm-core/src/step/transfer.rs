@@ -543,7 +543,7 @@ where
                         }
                     }
                     // SAFETY: each particle has its own entry in the table.
-                    unsafe { pushes.update(slot, |q| *q = push.times(mp)) };
+                    unsafe { pushes.update(slot, |q| *q = push.given(mp, *xp)) };
                 }
             }
             *vp = vn;

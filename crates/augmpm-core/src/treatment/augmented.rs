@@ -6,9 +6,8 @@
 use crate::geometry::Region;
 use crate::grid::{GridLayout, OutOfGrid, GHOST};
 use crate::kernel::{weight, MlsInverse, MlsKind, Moments, Stencil};
-use crate::math::resize_with_margin;
-use crate::math::{floor_i64, DimOps, Real, Vector};
-use crate::wall::{BoundaryPoint, WallContact};
+use crate::math::{floor_i64, resize_with_margin, DimOps, Real, Vector};
+use crate::wall::{BoundaryPoint, WallContact, WallImpulses};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -718,8 +717,8 @@ impl<const D: usize> AugmentedGrid<D> {
     }
 
     /// Wall conditions at the boundary points (grid points `num_nodes..`), after momentum → velocity;
-    /// each wall's impulse on the grid there, `m_b (v_b' − v_b)` (N·s), is added to `impulse[wall]`.
-    pub fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>], impulse: &mut [Vector<D>]) {
+    /// each wall's impulse on the grid there, `m_b (v_b' − v_b)` (N·s), is added to `impulse` at the point.
+    pub fn apply(&self, mass: &[Real], velocity: &mut [Vector<D>], impulse: &mut WallImpulses<D>) {
         let base = self.num_nodes();
         for (b, p) in self.points.iter().enumerate() {
             let i = base + b;
@@ -728,7 +727,7 @@ impl<const D: usize> AugmentedGrid<D> {
             if mass[i] != 0.0 {
                 let before = velocity[i];
                 velocity[i] = condition.apply_at(before, &p.normals, &p.velocity);
-                impulse[p.wall] += (velocity[i] - before) * mass[i];
+                impulse.add(p.wall, &p.x, (velocity[i] - before) * mass[i]);
             } else {
                 velocity[i] = condition.apply_at(p.velocity, &p.normals, &p.velocity);
             }

@@ -12,7 +12,7 @@ use crate::geometry::Region;
 use crate::grid::{GridLayout, OutOfGrid};
 use crate::kernel::{MlsInverse, MlsKind, Stencil};
 use crate::math::{DimOps, Real, Vector};
-use crate::wall::{BoundaryPoint, WallContact};
+use crate::wall::{BoundaryPoint, WallContact, WallImpulses};
 use augmented::{AugmentedGrid, WallParticles};
 use naive::NaiveBoundary;
 use schemars::JsonSchema;
@@ -49,7 +49,7 @@ pub trait WallTreatment<const D: usize> {
 
     /// Applies the walls' conditions at the grid points they act on (velocities, after the grid update),
     /// adding the impulse each wall gives the grid's material there, `m_i (v_i' − v_i)` (N·s, per metre
-    /// in 2D), to `impulse[wall]` (one per wall, the domain box last). P2G and the grid update conserve
+    /// in 2D), and its moment to `impulse` (one per wall, the domain box last). P2G and the grid update conserve
     /// momentum, so these are the walls' impulses on the material (with the augmented grid's G2P wall
     /// fit, counted in G2P).
     fn apply(
@@ -58,7 +58,7 @@ pub trait WallTreatment<const D: usize> {
         region: &dyn Region<D>,
         mass: &[Real],
         velocity: &mut [Vector<D>],
-        impulse: &mut [Vector<D>],
+        impulse: &mut WallImpulses<D>,
     );
 
     /// How each wall acts (condition, friction, whether it moves), the domain box last.
@@ -117,7 +117,7 @@ impl<const D: usize> WallTreatment<D> for NaiveBoundary<D> {
         region: &dyn Region<D>,
         mass: &[Real],
         velocity: &mut [Vector<D>],
-        impulse: &mut [Vector<D>],
+        impulse: &mut WallImpulses<D>,
     ) {
         NaiveBoundary::apply(self, layout, region, mass, velocity, impulse)
     }
@@ -186,7 +186,7 @@ impl<const D: usize> WallTreatment<D> for AugmentedGrid<D> {
         _: &dyn Region<D>,
         mass: &[Real],
         velocity: &mut [Vector<D>],
-        impulse: &mut [Vector<D>],
+        impulse: &mut WallImpulses<D>,
     ) {
         AugmentedGrid::apply(self, mass, velocity, impulse)
     }
@@ -262,7 +262,7 @@ impl<const D: usize> WallTreatment<D> for Boundary<D> {
         region: &dyn Region<D>,
         mass: &[Real],
         velocity: &mut [Vector<D>],
-        impulse: &mut [Vector<D>],
+        impulse: &mut WallImpulses<D>,
     ) {
         dispatch!(self, t => WallTreatment::apply(t, layout, region, mass, velocity, impulse))
     }

@@ -4,7 +4,7 @@
 use crate::geometry::Region;
 use crate::grid::GridLayout;
 use crate::math::{Real, Vector};
-use crate::wall::WallContact;
+use crate::wall::{WallContact, WallImpulses};
 
 /// A grid node on the wall side of the region, with the condition it gets.
 #[derive(Clone, Copy, Debug)]
@@ -56,7 +56,7 @@ impl<const D: usize> NaiveBoundary<D> {
     }
 
     /// Projects the grid velocities of wall nodes (after momentum → velocity), adding each wall's
-    /// impulse on the material, `m_i (v_i' − v_i)` (N·s), to `impulse[wall]`. Moving walls: the nodes
+    /// impulse on the material, `m_i (v_i' − v_i)` (N·s), at the node to `impulse`. Moving walls: the nodes
     /// that hold material are classified against `region` where its walls are now (in node order, as
     /// the list of still walls).
     pub fn apply(
@@ -65,14 +65,14 @@ impl<const D: usize> NaiveBoundary<D> {
         region: &dyn Region<D>,
         mass: &[Real],
         velocity: &mut [Vector<D>],
-        impulse: &mut [Vector<D>],
+        impulse: &mut WallImpulses<D>,
     ) {
         let mut project = |w: &WallNode<D>| {
             let m = mass[w.node];
             if m > 0.0 {
                 let before = velocity[w.node];
                 velocity[w.node] = self.walls[w.wall].apply(before, &w.normal, &w.velocity);
-                impulse[w.wall] += (velocity[w.node] - before) * m;
+                impulse.add(w.wall, &layout.position(w.node), (velocity[w.node] - before) * m);
             }
         };
         if self.moving {

@@ -26,11 +26,12 @@ pub const PULL_MAX: Real = 0.05;
 const MAX_ROWS: usize = MAX_FEET * 3;
 
 /// The velocity change (m/s) each wall gave one particle in G2P, by wall (at most one per foot):
-/// times the particle's mass, the impulse of the wall on it.
+/// times the particle's mass, the impulse of the wall on it; and where the particle was (m).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WallPush<const D: usize> {
     wall: [u32; MAX_FEET],
     dv: [Vector<D>; MAX_FEET],
+    pub at: Vector<D>,
 }
 
 impl<const D: usize> WallPush<D> {
@@ -38,7 +39,7 @@ impl<const D: usize> WallPush<D> {
 
     /// No wall pushed.
     pub fn none() -> Self {
-        Self { wall: [Self::EMPTY; MAX_FEET], dv: [Vector::<D>::zeros(); MAX_FEET] }
+        Self { wall: [Self::EMPTY; MAX_FEET], dv: [Vector::<D>::zeros(); MAX_FEET], at: Vector::<D>::zeros() }
     }
 
     /// Adds `dv` (m/s) to what wall `wall` gave.
@@ -51,11 +52,12 @@ impl<const D: usize> WallPush<D> {
         }
     }
 
-    /// The same, each velocity change times `m`.
-    pub fn times(mut self, m: Real) -> Self {
+    /// The impulses of the walls on a particle of mass `m` at `x`: each velocity change times `m`.
+    pub fn given(mut self, m: Real, x: Vector<D>) -> Self {
         for dv in &mut self.dv {
             *dv *= m;
         }
+        self.at = x;
         self
     }
 

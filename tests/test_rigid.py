@@ -1,0 +1,210 @@
+"""Rigid bodies that the material pushes and that push it back (``rigid_bodies``): a body is a wall the
+engine poses from gravity and the impulse its wall conditions give the material."""
+
+from __future__ import annotations
+
+import math
+import shutil
+
+import numpy as np
+import pytest
+
+import augmpm
+from augmpm.run import BODY_COLUMNS, resume_run, run_scene
+
+G = 9.81
+WATER = {"type": "fluid", "density": 1000.0, "stiffness": 3e4, "viscosity": 5.0}
+BOX = [[0.4, 0.40], [0.6, 0.40], [0.6, 0.5], [0.4, 0.5]]
+#: A tank whose floor is not aligned with the grid.
+TANK = [[0.1, 0.05], [0.9, 0.08], [0.9, 0.95], [0.1, 0.95]]
+
+
+def _scene(rigid: list[dict], resolution: int = 48, end: float = 2.0, **keys) -> augmpm.Scene:
+    """Water 0.3 m deep in ``TANK`` (slip walls) and the ``rigid`` bodies."""
+    scene = {
+        "gravity": [0.0, -G],
+        "grid": {"domain": [1.0, 1.0], "resolution": resolution},
+        "time": {"cfl": 0.4, "end": end, "output_interval": 100},
+        "wall_condition": "slip",
+        "walls": [{"type": "polygon", "vertices": TANK}],
+        "bodies": [{"shape": "box", "min": [0.0, 0.0], "max": [1.0, 0.35], "fill": True, "material": WATER}],
+        "rigid_bodies": rigid,
+        **keys,
+    }
+    return augmpm.Scene.from_dict(scene)
+
+
+def _clip_below(polygon: np.ndarray, level: float) -> float:
+    """Area of the part of ``polygon`` (counter-clockwise, (n, 2)) below y = ``level``."""
+    out = []
+    for a, b in zip(polygon, np.roll(polygon, -1, axis=0), strict=True):
+        if a[1] <= level:
+            out.append(a)
+        if (a[1] - level) * (b[1] - level) < 0:
+            out.append(a + (b - a) * (level - a[1]) / (b[1] - a[1]))
+    if len(out) < 3:
+        return 0.0
+    x, y = np.array(out).T
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def _water_level(sim: augmpm.Simulation, away_from: float) -> float:
+    """The free surface (m): the mean height of the top particle of each 2 cm column farther than 16 cm from
+    x = ``away_from``, plus half the particles' spacing (h/2 at 4 particles per cell)."""
+    x = sim.positions
+    tops = [
+        x[(x[:, 0] > a) & (x[:, 0] < a + 0.02), 1].max()
+        for a in np.arange(0.12, 0.88, 0.02)
+        if abs(a + 0.01 - away_from) >= 0.16
+    ]
+    return float(np.mean(tops)) + 0.25 * sim.cell_size
+
+
+def test_a_box_half_as_dense_as_water_floats():
+    """A box of density ρ/2 dropped onto water in a tank whose floor is at an angle to the grid floats: it
+    comes nearly to rest across the surface (0.15 cell of motion over the last 0.5 s of 3 s measured;
+    asserted < 0.25), and no water enters it at any sampled step (augmented, 48 cells). Its submerged part
+    is 0.55 of it where Archimedes says 0.5, measured against the surface taken from the highest particles
+    (the issue's 2% is not claimed: see the README); asserted between 0.4 and 0.7."""
+    body = {"shape": "polygon", "vertices": BOX, "density": 500.0}
+    sim = augmpm.Simulation(_scene([body], end=3.0), "augmented")
+    heights, outside = [], 0
+    while sim.time < 3.0 - 1e-9:
+        sim.step(round(0.05 / sim.dt))
+        outside = max(outside, sim.metrics()["n_outside"])
+        heights.append(sim.rigid_bodies[0][1])
+    assert outside == 0
+    assert np.ptp(heights[-10:]) < 0.25 * sim.cell_size
+    x, y, angle = sim.rigid_bodies[0][:3]
+    c, s = math.cos(angle), math.sin(angle)
+    drawn = np.array(BOX)
+    placed = (drawn - drawn.mean(axis=0)) @ np.array([[c, s], [-s, c]]) + [x, y]
+    submerged = _clip_below(placed, _water_level(sim, x)) / _clip_below(placed, 10.0)
+    assert 0.4 < submerged < 0.7
+
+
+def test_a_body_out_of_reach_of_the_material_falls_freely():
+    """Far from the water, a body only falls: symplectic Euler gives y = y0 − g dt² n(n+1)/2 after n steps
+    and the angle ω t, to round-off."""
+    disk = {"shape": "circle", "center": [0.5, 0.8], "radius": 0.05, "mass": 2.0, "angular_velocity": 1.5}
+    sim = augmpm.Simulation(_scene([disk]), "augmented")
+    n = 40
+    sim.step(n)
+    x, y, angle, vx, vy, w = sim.rigid_bodies[0]
+    dt = sim.dt
+    assert abs(y - (0.8 - G * dt * dt * n * (n + 1) / 2)) < 1e-12
+    assert x == 0.5 and vx == 0.0 and abs(vy + G * n * dt) < 1e-12
+    assert abs(angle - 1.5 * n * dt) < 1e-12 and w == 1.5
+
+
+@pytest.mark.parametrize("method", ["naive", "augmented"])
+def test_material_and_body_exchange_momentum_exactly(method):
+    """Without gravity and with no static wall in reach, a fluid disk thrown at a free quadrilateral:
+    the total linear momentum of material and body, Σ m_p v_p + m_b v_b, is conserved to round-off
+    (1e-13 relative over 600 steps); the angular momentum about the origin, Σ (x_p × m_p v_p +
+    m_p h²/4 (C_yx − C_xy)) + x_b × m_b v_b + I_b ω_b, to round-off with the naive walls (1e-12) and
+    within 1e-4 with the augmented grid (4e-5 measured: its G2P near walls is not P2G's transpose).
+    The body is pushed: it ends up moving at more than 0.1 m/s."""
+    quad = np.array([[0.5, 0.40], [0.6, 0.42], [0.58, 0.62], [0.48, 0.58]])
+    scene = {
+        "gravity": [0.0, 0.0],
+        "grid": {"domain": [1.0, 1.0], "resolution": 64},
+        "time": {"cfl": 0.4, "steps": 600, "output_interval": 100},
+        "wall_condition": "slip",
+        "bodies": [
+            {
+                "shape": "circle",
+                "center": [0.3, 0.45],
+                "radius": 0.08,
+                "velocity": [1.0, 0.2],
+                "material": {**WATER, "viscosity": 1.0},
+            }
+        ],
+        "rigid_bodies": [{"shape": "polygon", "vertices": quad.tolist(), "density": 800.0}],
+    }
+    sim = augmpm.Simulation(augmpm.Scene.from_dict(scene), method)
+    x, y = quad.T
+    cross = x * np.roll(y, -1) - np.roll(x, -1) * y
+    area = cross.sum() / 2
+    c = np.array([((x + np.roll(x, -1)) * cross).sum(), ((y + np.roll(y, -1)) * cross).sum()]) / (6 * area)
+    polar = (
+        cross * (x**2 + x * np.roll(x, -1) + np.roll(x, -1) ** 2 + y**2 + y * np.roll(y, -1) + np.roll(y, -1) ** 2)
+    ).sum() / 12
+    mass, inertia = 800.0 * area, 800.0 * (polar - area * c @ c)
+    h = 1 / 64
+
+    def totals():
+        st = sim.checkpoint()
+        xp, vp, mp, cp = st["x"], st["v"], st["mass"], st["c"].reshape(-1, 2, 2)
+        bx, by, _, bvx, bvy, bw = sim.rigid_bodies[0]
+        p = (mp[:, None] * vp).sum(axis=0) + mass * np.array([bvx, bvy])
+        spin = np.sum(mp * h * h / 4 * (cp[:, 1, 0] - cp[:, 0, 1]))
+        orbit = np.sum(mp * (xp[:, 0] * vp[:, 1] - xp[:, 1] * vp[:, 0]))
+        return p, orbit + spin + mass * (bx * bvy - by * bvx) + inertia * bw
+
+    p0, l0 = totals()
+    sim.step(600)
+    p1, l1 = totals()
+    assert np.abs(p1 - p0).max() < 1e-13 * np.abs(p0).max()
+    assert abs(l1 - l0) < (1e-12 if method == "naive" else 1e-4) * abs(l0)
+    assert np.linalg.norm(sim.rigid_bodies[0][3:5]) > 0.1
+    assert np.all(sim.wall_impulse[-1] == 0)  # the domain box was never touched
+
+
+def test_a_run_with_bodies_writes_bodies_csv_and_resumes_bitwise(tmp_path):
+    """``bodies.csv`` holds one row per frame and body (its state, the material's force and torque on it),
+    the frames' npz their states; a run resumed from its checkpoint, on another thread count, writes the
+    same ``metrics.csv`` and ``bodies.csv`` bytes."""
+    rigid = [
+        {"shape": "polygon", "vertices": BOX, "density": 500.0},
+        {"shape": "circle", "center": [0.75, 0.6], "radius": 0.05, "mass": 3.0, "angular_velocity": 2.0},
+    ]
+    scene = _scene(rigid, resolution=32, end=0.6).model_copy(
+        update={"time": _scene([]).time.model_copy(update={"end": 0.6, "output_interval": 50})}
+    )
+    whole = run_scene(scene, tmp_path / "whole", progress=False, checkpoint_every=3, animation=None, threads=1)
+    assert whole.frames > 4
+    rows = (tmp_path / "whole" / "bodies.csv").read_text().splitlines()
+    assert rows[0].split(",") == ["frame", "step", "time", "body", *BODY_COLUMNS]
+    assert len(rows) == 1 + 2 * whole.frames
+    with np.load(tmp_path / "whole" / "particles" / "frame_00003.npz") as z:
+        assert z["rigid_bodies"].shape == (2, 6)
+    # The box landed on the water: the material pushed it up by the end.
+    last_box = rows[-2].split(",")
+    assert last_box[3] == "0" and float(last_box[BODY_COLUMNS.index("force_y") + 4]) > 0
+    shutil.copytree(tmp_path / "whole", tmp_path / "again")
+    resume_run(tmp_path / "again", progress=False, threads=2)
+    for name in ("metrics.csv", "bodies.csv"):
+        assert (tmp_path / "again" / name).read_bytes() == (tmp_path / "whole" / name).read_bytes()
+
+
+@pytest.mark.parametrize(
+    ("body", "key"),
+    [
+        ({"shape": "circle", "center": [0.5, 0.6], "radius": 0.05}, "rigid_bodies[0]"),
+        ({"shape": "circle", "center": [0.5, 0.6], "radius": 0.05, "mass": 1.0, "density": 5.0}, "rigid_bodies[0]"),
+        ({"shape": "polygon", "vertices": BOX[::-1], "density": 500.0}, "rigid_bodies[0].vertices"),
+        ({"shape": "circle", "center": [0.5, 0.6], "radius": -0.05, "mass": 1.0}, "rigid_bodies[0].radius"),
+    ],
+)
+def test_bad_rigid_bodies_are_refused_naming_the_key(body, key):
+    """Neither or both of density and mass, a clockwise polygon, a negative radius: a SceneError names
+    the key."""
+    with pytest.raises(augmpm.SceneError) as e:
+        augmpm.Simulation(_scene([body]))
+    assert e.value.key == key
+
+
+def test_a_body_is_moved_by_the_material_not_from_outside():
+    """``set_wall_pose`` refuses a rigid body's wall (the engine poses it), naming ``wall``; a body
+    whose velocity crosses more than a cell per step of a fixed ``time.dt`` is refused naming it."""
+    sim = augmpm.Simulation(_scene([{"shape": "polygon", "vertices": BOX, "density": 500.0}]))
+    with pytest.raises(augmpm.SceneError, match="rigid_bodies\\[0\\]") as e:
+        sim.set_wall_pose(1, (0.0, 0.0))
+    assert e.value.key == "wall"
+    fast = {"shape": "circle", "center": [0.5, 0.6], "radius": 0.05, "mass": 1.0, "velocity": [100.0, 0.0]}
+    scene = _scene([fast]).to_dict()
+    scene["time"] = {"dt": 1e-3, "end": 0.1, "output_interval": 10}
+    with pytest.raises(augmpm.SceneError) as e:
+        augmpm.Simulation(augmpm.Scene.from_dict(scene))
+    assert e.value.key == "rigid_bodies[0].velocity"
