@@ -152,7 +152,7 @@ def test_material_and_body_exchange_momentum_exactly(method):
 
 
 def test_a_run_with_bodies_writes_bodies_csv_and_resumes_bitwise(tmp_path):
-    """``bodies.csv`` holds one row per frame and body (its state, the material's force and torque on it),
+    """``bodies.csv`` holds one row per frame and body (its state, the material's force on it),
     the frames' npz their states; a run resumed from its checkpoint, on another thread count, writes the
     same ``metrics.csv`` and ``bodies.csv`` bytes."""
     rigid = [
@@ -185,11 +185,15 @@ def test_a_run_with_bodies_writes_bodies_csv_and_resumes_bitwise(tmp_path):
         ({"shape": "circle", "center": [0.5, 0.6], "radius": 0.05, "mass": 1.0, "density": 5.0}, "rigid_bodies[0]"),
         ({"shape": "polygon", "vertices": BOX[::-1], "density": 500.0}, "rigid_bodies[0].vertices"),
         ({"shape": "circle", "center": [0.5, 0.6], "radius": -0.05, "mass": 1.0}, "rigid_bodies[0].radius"),
+        (
+            {"shape": "circle", "center": [0.5, 0.6], "radius": 0.05, "mass": 1.0, "friction": 0.3},
+            "rigid_bodies[0].friction",
+        ),
     ],
 )
 def test_bad_rigid_bodies_are_refused_naming_the_key(body, key):
-    """Neither or both of density and mass, a clockwise polygon, a negative radius: a SceneError names
-    the key."""
+    """Neither or both of density and mass, a clockwise polygon, a negative radius, friction on a surface
+    that is not separate: a SceneError names the key."""
     with pytest.raises(augmpm.SceneError) as e:
         augmpm.Simulation(_scene([body]))
     assert e.value.key == key
@@ -208,3 +212,20 @@ def test_a_body_is_moved_by_the_material_not_from_outside():
     with pytest.raises(augmpm.SceneError) as e:
         augmpm.Simulation(augmpm.Scene.from_dict(scene))
     assert e.value.key == "rigid_bodies[0].velocity"
+
+
+def test_a_state_without_the_bodies_poses_is_refused():
+    """A body's state is its wall's pose: a checkpoint without it (or the wall correction of the grid
+    density, computed once for still walls) is refused naming it, and the simulation goes on unchanged."""
+    sim = augmpm.Simulation(_scene([{"shape": "polygon", "vertices": BOX, "density": 500.0}]))
+    sim.step(10)
+    state = sim.checkpoint()
+    del state["wall_pose"]
+    with pytest.raises(augmpm.SceneError, match="rigid_bodies\\[0\\]"):
+        sim.restore(state)
+    sim.step(1)
+    scene = _scene([{"shape": "polygon", "vertices": BOX, "density": 500.0}]).to_dict()
+    scene["grid"]["density_wall_correction"] = True
+    with pytest.raises(augmpm.SceneError) as e:
+        augmpm.Scene.from_dict(scene)
+    assert e.value.key == "grid.density_wall_correction"

@@ -230,3 +230,18 @@ def test_a_refused_restore_changes_nothing():
     sim.step(30)
     twin.step(30)
     assert np.array_equal(sim.positions, twin.positions)
+
+
+def test_a_3d_checkpoint_written_before_3d_poses_restores():
+    """3D checkpoints written before 3D walls could be posed hold an empty ``wall_pose`` of 8 columns (the
+    2D width): it restores as no posed wall."""
+    scene = augmpm.Scene3.from_dict(_tank())
+    sim = augmpm.Simulation(scene)
+    sim.step(5)
+    state = sim.checkpoint()
+    state["wall_pose"] = np.zeros((0, 8))
+    again = augmpm.Simulation(scene)
+    again.restore(state)
+    sim.step(5)
+    again.step(5)
+    assert np.array_equal(again.positions, sim.positions)

@@ -63,9 +63,8 @@ def wall_force_columns(walls: int, dim: int = 2) -> list[str]:
 
 #: What ``bodies.csv`` holds of each rigid body at each frame (2D): its centre of mass (m), its turn from
 #: where the scene draws it (rad, counter-clockwise), their rates (m/s, rad/s), and the mean force (N per
-#: metre of depth) and torque about its centre of mass (N·m per metre) the material put on it over the
-#: output interval that ends at the row (0 in the first row).
-BODY_COLUMNS = ["x", "y", "angle", "vx", "vy", "angular_velocity", "force_x", "force_y", "torque"]
+#: metre of depth) the material put on it over the output interval that ends at the row (0 in the first row).
+BODY_COLUMNS = ["x", "y", "angle", "vx", "vy", "angular_velocity", "force_x", "force_y"]
 
 
 def rigid_body_columns(bodies: int) -> list[str]:
@@ -223,9 +222,8 @@ class _Run:
         self.columns = METRIC_COLUMNS + wall_force_columns(len(sim.wall_impulse) - 1, sim.dim)
         self.bodies = len(getattr(sim.scene, "rigid_bodies", []))
         self.columns += rigid_body_columns(self.bodies)
-        # The walls' impulses (and their moments) at the last row, from which the next row's forces are measured.
+        # The walls' impulses at the last row, from which the next row's forces are measured.
         self.impulse_at = (sim.wall_impulse.copy(), sim.time)
-        self.angular_at = sim.wall_angular_impulse.copy()
         self.wall_frames = [(t, f.replace("vtk/", "vtk/walls/")) for t, f in self.vtk_frames] if self.walls else []
         if (outlines or sim.dim == 3) and not self.walls:
             (out / "vtk" / "walls").mkdir(parents=True, exist_ok=True)
@@ -326,7 +324,7 @@ class _Run:
         forces = self.columns[len(METRIC_COLUMNS) : len(self.columns) - len(rigid_body_columns(self.bodies))]
         row |= dict(zip(forces, map(float, force.ravel()), strict=True))
         if self.bodies:
-            row |= self._body_columns(impulse - last, sim.time - since, force)
+            row |= self._body_columns(force)
         self.impulse_at = (impulse, sim.time)
         self.pending.append((row, png))
         checkpoint = self.every and self.frame % self.every == 0
@@ -336,19 +334,13 @@ class _Run:
             meta = {**self.meta, "frame": self.frame, "done": self.done}
             save_checkpoint(out / CHECKPOINT, sim, meta)
 
-    def _body_columns(self, impulse: np.ndarray, interval: float, force: np.ndarray) -> dict[str, float]:
-        """Each rigid body's row entries: its state now, and the mean force and torque the material put on
-        it over the last ``interval`` (s), in which its wall gave the material ``impulse`` (per wall)."""
-        sim, first = self.sim, len(self.sim.scene.walls)
-        angular = sim.wall_angular_impulse
-        moment = angular - self.angular_at
-        self.angular_at = angular
+    def _body_columns(self, force: np.ndarray) -> dict[str, float]:
+        """Each rigid body's row entries: its state now, and the mean force the material put on it (its
+        wall's row of ``force``, the walls' mean forces over the interval)."""
+        first = len(self.sim.scene.walls)
         row = {}
-        for k, state in enumerate(sim.rigid_bodies):
-            w = first + k
-            (cx, cy), (jx, jy) = state[:2], impulse[w]
-            torque = -(moment[w] - (cx * jy - cy * jx)) / interval if interval > 0 else 0.0
-            values = [*map(float, state), float(force[w, 0]), float(force[w, 1]), float(torque)]
+        for k, state in enumerate(self.sim.rigid_bodies):
+            values = [*map(float, state), float(force[first + k, 0]), float(force[first + k, 1])]
             row |= {f"rigid_{k}_{c}": v for c, v in zip(BODY_COLUMNS, values, strict=True)}
         return row
 

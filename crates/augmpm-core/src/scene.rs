@@ -729,7 +729,24 @@ impl Scene {
                 }
             }
         }
-        let separate = self.wall_condition == WallCondition::Separate || conditions.contains(&WallCondition::Separate);
+        for (k, body) in self.rigid_bodies.iter().enumerate() {
+            let condition = body.condition.unwrap_or(self.wall_condition);
+            if body.friction.is_some_and(|mu| mu > 0.0) && condition != WallCondition::Separate {
+                return Err(SceneError::new(
+                    format!("rigid_bodies[{k}].friction"),
+                    format!("friction acts on separate surfaces; this body's is {condition:?}").to_lowercase(),
+                ));
+            }
+            if self.grid.density_wall_correction {
+                return Err(SceneError::new(
+                    "grid.density_wall_correction",
+                    format!("not available with moving walls (rigid_bodies[{k}] moves)"),
+                ));
+            }
+        }
+        let separate = self.wall_condition == WallCondition::Separate
+            || conditions.contains(&WallCondition::Separate)
+            || self.rigid_bodies.iter().any(|b| b.condition == Some(WallCondition::Separate));
         if self.wall_friction > 0.0 && !separate {
             return Err(SceneError::new(
                 "wall_friction",

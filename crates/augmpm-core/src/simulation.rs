@@ -595,6 +595,14 @@ where
         for (w, pose) in &state.wall_poses {
             self.pose_refused(*w, pose).map_err(|(key, reason)| format!("wall_pose of wall {w}: {key}: {reason}"))?;
         }
+        if let Some(k) =
+            self.model.bodies.iter().position(|b| state.wall_poses.binary_search_by_key(&b.wall, |&(w, _)| w).is_err())
+        {
+            return Err(format!(
+                "wall_pose has no row for wall {} (rigid_bodies[{k}]): the state is not of this scene",
+                self.model.bodies[k].wall
+            ));
+        }
         let layout = &self.model.layout;
         let run = |s: &mut Schedule<D>| s.restore(layout, &p.x, &state.binning);
         match &self.pool {

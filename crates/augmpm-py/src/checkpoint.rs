@@ -118,7 +118,12 @@ macro_rules! state_conversions {
                 if dict.contains("wall_pose")? {
                     let rows = rows_of::<f64>(dict, "wall_pose", "float64")?;
                     let columns = 1 + $core::motion::WallPose::<D>::names().len();
-                    let flat = array_of::<f64>(dict, "wall_pose", rows, &[columns], "float64")?;
+                    // No posed wall: an empty array of any width (3D checkpoints before 3D poses wrote (0, 8)).
+                    let flat = if rows == 0 {
+                        Vec::new()
+                    } else {
+                        array_of::<f64>(dict, "wall_pose", rows, &[columns], "float64")?
+                    };
                     for row in flat.chunks(columns) {
                         let wall = row[0];
                         if !(wall >= 0.0 && wall.fract() == 0.0 && wall < u32::MAX as f64) {
