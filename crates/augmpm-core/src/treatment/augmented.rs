@@ -915,6 +915,17 @@ mod tests {
         }
     }
 
+    /// A box tank turned 0.3 rad about (1, 0.2, 0.6), an axis in no coordinate plane, in the unit cube.
+    fn turned_tank() -> crate::geometry3::Solid {
+        let axes =
+            nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(Vector::<3>::new(1.0, 0.2, 0.6)), 0.3);
+        crate::geometry3::Solid::Box {
+            centre: Vector::<3>::new(0.5, 0.45, 0.5),
+            half: Vector::<3>::new(0.3, 0.25, 0.25),
+            axes: axes.into_inner(),
+        }
+    }
+
     /// In 3D too: a box container shaken and turned about an axis in no coordinate plane and a sphere
     /// carried through it, 120 steps, the followed grid equal to a full build after each.
     #[test]
@@ -922,13 +933,7 @@ mod tests {
         use crate::geometry3::{Solid, Wall3, Walls3};
         use crate::motion::Motion3;
         let layout = GridLayout::<3>::new(1.0 / 20.0, [20, 20, 20]);
-        let axes =
-            nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(Vector::<3>::new(1.0, 0.2, 0.6)), 0.3);
-        let tank = Solid::Box {
-            centre: Vector::<3>::new(0.5, 0.45, 0.5),
-            half: Vector::<3>::new(0.3, 0.25, 0.25),
-            axes: axes.into_inner(),
-        };
+        let tank = turned_tank();
         let ball = Solid::Sphere { centre: Vector::<3>::new(0.4, 0.4, 0.45), radius: 0.08 };
         let shake = Motion3::Oscillation {
             amplitude: [0.05, 0.0, 0.02],
@@ -958,15 +963,9 @@ mod tests {
     /// it (measured: 1,211 of 1,239 uncapped particles centred, as with the eigenvalue test before).
     #[test]
     fn the_3d_tilt_centres_the_points_with_factored_exponentials() {
-        use crate::geometry3::{Solid, Wall3, Walls3};
+        use crate::geometry3::{Wall3, Walls3};
         let layout = GridLayout::<3>::new(1.0 / 20.0, [20, 20, 20]);
-        let axes =
-            nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(Vector::<3>::new(1.0, 0.2, 0.6)), 0.3);
-        let tank = Solid::Box {
-            centre: Vector::<3>::new(0.5, 0.45, 0.5),
-            half: Vector::<3>::new(0.3, 0.25, 0.25),
-            axes: axes.into_inner(),
-        };
+        let tank = turned_tank();
         let region = Walls3::new(vec![Wall3 { solid: tank, side: Side::Inside }], Vector::<3>::new(1.0, 1.0, 1.0));
         let contacts = vec![WallContact::from(crate::wall::WallCondition::Slip); 2];
         let mut grid = AugmentedGrid::new(&layout, &region, layout.h, contacts, 0.1 * layout.h);
