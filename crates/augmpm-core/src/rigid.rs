@@ -9,7 +9,7 @@
 //! `v' = v + (−J)/m + g dt`, `ω' = ω + I⁻¹(−L_c)` with `L_c = L − c × J` the moment about the centre of mass
 //! `c` of the impulse `J` the body gave the material (`L` about the origin), then the pose moves on at the
 //! new velocities, `c' = c + v' dt`. So the body gains exactly the momentum and (in 2D) the angular momentum
-//! about the origin that the material lost at its wall: `c' × m v' = c × m v' `. The material saw the wall
+//! about the origin that the material lost at its wall (`c' × m v' = c × m v'`). The material saw the wall
 //! move at the old velocities during the step; the difference, `(v' − v) dt` per step, is followed as any
 //! wall move is. Bodies do not yet meet each other or the scene's walls.
 
