@@ -701,6 +701,17 @@ mod tests {
     use super::shapes::{cuboid, icosphere};
     use super::*;
 
+    /// The least distance (m) between two of the sampled `points`.
+    fn closest_pair<T>(points: &[(V, T)]) -> f64 {
+        let mut closest = f64::INFINITY;
+        for (i, (x, _)) in points.iter().enumerate() {
+            for (y, _) in &points[i + 1..] {
+                closest = closest.min((y - x).norm());
+            }
+        }
+        closest
+    }
+
     fn uniform(n: usize) -> Vec<f64> {
         let mut s = 0x9e3779b97f4a7c15u64;
         (0..n)
@@ -763,15 +774,8 @@ mod tests {
             for (x, _) in &points {
                 assert!(mesh.signed_distance(x).0.abs() < 1e-12);
             }
-            for (i, (x, _)) in points.iter().enumerate() {
-                let nearest = points
-                    .iter()
-                    .enumerate()
-                    .filter(|&(j, _)| j != i)
-                    .map(|(_, p)| (p.0 - x).norm())
-                    .fold(f64::INFINITY, f64::min);
-                assert!(nearest >= 0.75 * spacing - 1e-12, "two points {nearest} apart");
-            }
+            let closest = closest_pair(&points);
+            assert!(closest >= 0.75 * spacing - 1e-12, "two points {closest} apart");
             let r = uniform(3 * 3000);
             for k in 0..3000 {
                 let x = V::new(r[3 * k], r[3 * k + 1], r[3 * k + 2]);
@@ -840,15 +844,8 @@ mod tests {
         for (x, n) in &points {
             assert!(exact(x).abs() < 1e-12 && (n.norm() - 1.0).abs() < 1e-12);
         }
-        for (i, (x, _)) in points.iter().enumerate() {
-            let nearest = points
-                .iter()
-                .enumerate()
-                .filter(|&(j, _)| j != i)
-                .map(|(_, p)| (p.0 - x).norm())
-                .fold(f64::INFINITY, f64::min);
-            assert!(nearest >= 0.7 * spacing - 1e-12, "two points {nearest} apart");
-        }
+        let closest = closest_pair(&points);
+        assert!(closest >= 0.7 * spacing - 1e-12, "two points {closest} apart");
         for k in 0..2000 {
             let x = V::new(rnd[3 * k], rnd[3 * k + 1], rnd[3 * k + 2]);
             let (d, n) = plate.shell_distance(&x, half);

@@ -183,8 +183,23 @@ impl<const D: usize> WallPose<D> {
     }
 
     /// The displacement (m) of the pivot at time `t` (s).
-    fn offset(&self, t: Real) -> Vector<D> {
+    pub fn offset(&self, t: Real) -> Vector<D> {
         Vector::<D>::from_fn(|i, _| self.position[i] + self.velocity[i] * (t - self.time))
+    }
+
+    /// The turn at time `t` (s): `angle`, then `angular_velocity` × (t − `time`).
+    pub fn rotation(&self, t: Real) -> nalgebra::Rotation3<Real> {
+        nalgebra::Rotation3::new(P3::from(self.angular_velocity) * (t - self.time))
+            * nalgebra::Rotation3::new(P3::from(self.angle))
+    }
+
+    /// The turn at time `t` (s) as a rotation vector (rad; in 2D the angle about z, summed exactly).
+    pub fn turn(&self, t: Real) -> [Real; 3] {
+        if D == 2 {
+            [0.0, 0.0, self.angle[2] + self.angular_velocity[2] * (t - self.time)]
+        } else {
+            self.rotation(t).scaled_axis().into()
+        }
     }
 }
 
@@ -196,7 +211,7 @@ impl WallPose<2> {
 
     /// The pose at time `t` (s) of a wall turning about `pivot`.
     pub fn pose(&self, t: Real, pivot: Point) -> Pose {
-        Pose { pivot, offset: self.offset(t), angle: self.angle[2] + self.angular_velocity[2] * (t - self.time) }
+        Pose { pivot, offset: self.offset(t), angle: self.turn(t)[2] }
     }
 }
 
@@ -204,9 +219,7 @@ impl WallPose<3> {
     /// The pose at time `t` (s) of a wall turning about `pivot`: turned by `angle`, then by
     /// `angular_velocity` × (t − `time`).
     pub fn pose3(&self, t: Real, pivot: P3) -> Pose3 {
-        let spin = nalgebra::Rotation3::new(P3::from(self.angular_velocity) * (t - self.time));
-        let rotation = spin * nalgebra::Rotation3::new(P3::from(self.angle));
-        Pose3 { pivot, offset: self.offset(t), rotation: rotation.into_inner() }
+        Pose3 { pivot, offset: self.offset(t), rotation: self.rotation(t).into_inner() }
     }
 }
 

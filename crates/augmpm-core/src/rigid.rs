@@ -44,24 +44,22 @@ impl<const D: usize> RigidBody<D> {
         angular: &Vector<3>,
     ) -> WallPose<D> {
         let t1 = t + dt;
-        let offset = |s: Real| Vector::<D>::from_fn(|k, _| pose.position[k] + pose.velocity[k] * (s - pose.time));
-        let c = self.centre + offset(t);
+        let c = self.centre + pose.offset(t);
         let v = Vector::<D>::from(pose.velocity) - linear / self.mass + gravity * dt;
         let spin = -(angular - moment(&c, linear));
         let w = Vector::<3>::from(pose.angular_velocity);
         let (angle, w) = if D == 2 {
             let w = w.z + spin.z / self.inertia[(2, 2)];
-            ([0.0, 0.0, pose.angle[2] + pose.angular_velocity[2] * (t - pose.time) + w * dt], [0.0, 0.0, w])
+            ([0.0, 0.0, pose.turn(t)[2] + w * dt], [0.0, 0.0, w])
         } else {
             // The inertia turned as the body is at `t` (the gyroscopic term is left out of the step).
-            let now =
-                nalgebra::Rotation3::new(w * (t - pose.time)) * nalgebra::Rotation3::new(Vector::<3>::from(pose.angle));
+            let now = pose.rotation(t);
             let r = now.into_inner();
             let world = r * self.inertia * r.transpose();
             let w = w + world.try_inverse().map_or(Vector::<3>::zeros(), |inv| inv * spin);
             ((nalgebra::Rotation3::new(w * dt) * now).scaled_axis().into(), w.into())
         };
-        let position = offset(t) + v * dt;
+        let position = pose.offset(t) + v * dt;
         WallPose { time: t1, position: position.into(), angle, velocity: v.into(), angular_velocity: w }
     }
 }

@@ -844,15 +844,8 @@ where
             .map(|body| {
                 let i = self.state.wall_poses.binary_search_by_key(&body.wall, |&(w, _)| w).expect("posed");
                 let pose = &self.state.wall_poses[i].1;
-                let s = self.state.time - pose.time;
-                let centre = body.centre + Vector::<D>::from_fn(|k, _| pose.position[k] + pose.velocity[k] * s);
-                let turn = if D == 2 {
-                    [0.0, 0.0, pose.angle[2] + pose.angular_velocity[2] * s]
-                } else {
-                    let spin = nalgebra::Rotation3::new(Vector::<3>::from(pose.angular_velocity) * s);
-                    (spin * nalgebra::Rotation3::new(Vector::<3>::from(pose.angle))).scaled_axis().into()
-                };
-                (centre, turn, Vector::<D>::from(pose.velocity), pose.angular_velocity)
+                let t = self.state.time;
+                (body.centre + pose.offset(t), pose.turn(t), Vector::<D>::from(pose.velocity), pose.angular_velocity)
             })
             .collect()
     }
