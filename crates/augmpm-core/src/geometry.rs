@@ -140,6 +140,16 @@ impl<const D: usize> WallFeet<D> {
     }
 }
 
+/// Where a moving wall is over a step: its drawing turned about `pivot` (m, where the scene draws it) by
+/// `turn` (a rotation vector, rad; about z in 2D) and displaced by `offset` (m), at the step's start
+/// (`[0]`) and end (`[1]`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Placement<const D: usize> {
+    pub pivot: Vector<D>,
+    pub offset: [Vector<D>; 2],
+    pub turn: [[Real; 3]; 2],
+}
+
 /// A region the material may occupy, bounded by walls.
 pub trait Region<const D: usize>: Send + Sync {
     fn distance(&self, x: &Vector<D>) -> WallDistance<D>;
@@ -202,6 +212,11 @@ pub trait Region<const D: usize>: Send + Sync {
     /// Each wall where it is now, as a closed outline (its vertices; a circle as 64 points), for drawing.
     fn outlines(&self) -> Vec<Vec<Vector<D>>> {
         Vec::new()
+    }
+
+    /// Where wall `wall` is over the step of the last [`Region::set_time`], if it moves.
+    fn placement(&self, _wall: usize) -> Option<Placement<D>> {
+        None
     }
 
     /// Whether wall `wall` moves.
@@ -542,6 +557,16 @@ impl Walls2 {
         self.drawn[wall].reach_from(&self.pivot(wall))
     }
 
+    /// Wall `wall` as the scene draws it.
+    pub fn drawn(&self, wall: usize) -> &WallShape {
+        &self.drawn[wall]
+    }
+
+    /// The domain box, a container.
+    pub fn domain_box(&self) -> &Polygon {
+        &self.domain_box
+    }
+
     /// The pose of wall `wall` now.
     pub fn pose(&self, wall: usize) -> Pose {
         self.now[wall]
@@ -717,6 +742,18 @@ impl Region<2> for Walls2 {
 
     fn is_moving(&self, wall: usize) -> bool {
         Walls2::is_moving(self, wall)
+    }
+
+    fn placement(&self, wall: usize) -> Option<Placement<2>> {
+        if !self.is_moving(wall) {
+            return None;
+        }
+        let (now, next) = (self.now[wall], self.next[wall]);
+        Some(Placement {
+            pivot: now.pivot,
+            offset: [now.offset, next.offset],
+            turn: [[0.0, 0.0, now.angle], [0.0, 0.0, next.angle]],
+        })
     }
 
     fn surface_velocity(&self, wall: usize, x: &Point, n: &Point) -> Point {

@@ -5,7 +5,7 @@
 //! writes); [`kernel`] (B-spline weights, MLS shape functions), [`grid`],
 //! [`particles`] (the per-particle field table), [`material`] (constitutive
 //! models) and [`wall`] (wall conditions, boundary points); [`mesh`] (closed
-//! triangle meshes), [`geometry`] and [`geometry3`] (the walls' shapes); [`treatment`] (the wall treatments behind one trait: naive,
+//! triangle meshes), [`geometry`] and [`geometry3`] (the walls' shapes); [`contact`] (what rigid bodies meet besides the material, through rapier); [`treatment`] (the wall treatments behind one trait: naive,
 //! augmented); [`step`] (the particles' schedule, the stages of a step);
 //! [`simulation`] (model, state, the step in order); [`schema`] and [`scene`]
 //! (scene parameters, declared once, and building a simulation from a scene).
@@ -13,6 +13,7 @@
 // Index loops over the dimension `D` read like the formulas they implement.
 #![allow(clippy::needless_range_loop)]
 
+pub mod contact;
 pub mod geometry;
 pub mod geometry3;
 pub mod grid;

@@ -11,7 +11,8 @@
 //! new velocities, `c' = c + v' dt`. So the body gains exactly the momentum and (in 2D) the angular momentum
 //! about the origin that the material lost at its wall (`c' × m v' = c × m v'`). The material saw the wall
 //! move at the old velocities during the step; the difference, `(v' − v) dt` per step, is followed as any
-//! wall move is. Bodies do not yet meet each other or the scene's walls.
+//! wall move is. What a body meets besides the material (other bodies, the scene's walls, its hinge) is
+//! resolved in [`crate::contact`], which then moves it instead of [`drift`].
 
 use crate::math::{Matrix, Real, Vector};
 use crate::motion::WallPose;
@@ -33,7 +34,8 @@ pub struct RigidBody<const D: usize> {
 
 impl<const D: usize> RigidBody<D> {
     /// The pose at `t + dt` (s) of the body in `pose` at `t`, after its wall gave the material the impulse
-    /// `linear` (N·s) with moment `angular` (N·m·s, about the origin) over the step, under `gravity` (m/s²).
+    /// `linear` (N·s) with moment `angular` (N·m·s, about the origin) over the step, under `gravity` (m/s²),
+    /// meeting nothing else: [`RigidBody::kick`], then [`drift`].
     pub fn advance(
         &self,
         pose: &WallPose<D>,
@@ -43,25 +45,47 @@ impl<const D: usize> RigidBody<D> {
         linear: &Vector<D>,
         angular: &Vector<3>,
     ) -> WallPose<D> {
-        let t1 = t + dt;
+        drift(&self.kick(pose, t, dt, gravity, linear, angular), dt)
+    }
+
+    /// The body in `pose` at `t` (s), still there, with its velocities after a step `dt` (s) in which its
+    /// wall gave the material the impulse `linear` (N·s) with moment `angular` (N·m·s, about the origin),
+    /// under `gravity` (m/s²).
+    pub fn kick(
+        &self,
+        pose: &WallPose<D>,
+        t: Real,
+        dt: Real,
+        gravity: &Vector<D>,
+        linear: &Vector<D>,
+        angular: &Vector<3>,
+    ) -> WallPose<D> {
         let c = self.centre + pose.offset(t);
         let v = Vector::<D>::from(pose.velocity) - linear / self.mass + gravity * dt;
         let spin = -(angular - moment(&c, linear));
         let w = Vector::<3>::from(pose.angular_velocity);
-        let (angle, w) = if D == 2 {
-            let w = w.z + spin.z / self.inertia[(2, 2)];
-            ([0.0, 0.0, pose.turn(t)[2] + w * dt], [0.0, 0.0, w])
+        let w = if D == 2 {
+            [0.0, 0.0, w.z + spin.z / self.inertia[(2, 2)]]
         } else {
             // The inertia turned as the body is at `t` (the gyroscopic term is left out of the step).
-            let now = pose.rotation(t);
-            let r = now.into_inner();
+            let r = pose.rotation(t).into_inner();
             let world = r * self.inertia * r.transpose();
-            let w = w + world.try_inverse().map_or(Vector::<3>::zeros(), |inv| inv * spin);
-            ((nalgebra::Rotation3::new(w * dt) * now).scaled_axis().into(), w.into())
+            (w + world.try_inverse().map_or(Vector::<3>::zeros(), |inv| inv * spin)).into()
         };
-        let position = pose.offset(t) + v * dt;
-        WallPose { time: t1, position: position.into(), angle, velocity: v.into(), angular_velocity: w }
+        WallPose {
+            time: t,
+            position: pose.offset(t).into(),
+            angle: pose.turn(t),
+            velocity: v.into(),
+            angular_velocity: w,
+        }
     }
+}
+
+/// The pose after `dt` (s) of a body in `pose` moving freely at its velocities.
+pub fn drift<const D: usize>(pose: &WallPose<D>, dt: Real) -> WallPose<D> {
+    let t = pose.time + dt;
+    WallPose { time: t, position: pose.offset(t).into(), angle: pose.turn(t), ..*pose }
 }
 
 /// Area (m²), centroid (m) and polar moment of area about the centroid (m⁴) of a simple polygon given

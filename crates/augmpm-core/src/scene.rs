@@ -1,6 +1,7 @@
 //! Scene description (the resolved form of a scene file) and how a 2D
 //! simulation is built from it: validation, walls, particle seeding.
 
+use crate::contact::{Contact, Contacts, Contacts2};
 use crate::geometry::{Circle, Point, Polygon, Region, Side, Stroke, SurfaceMotion, WallShape, Walls2};
 use crate::grid::GridLayout;
 use crate::material::Material;
@@ -319,8 +320,8 @@ pub enum RigidShape {
 }
 
 /// A rigid body that the material pushes and that pushes it back: a solid shape of uniform density whose
-/// surface is a moving wall; gravity and the impulse of its wall conditions move it. Bodies do not yet
-/// meet each other or the scene's walls.
+/// surface is a moving wall; gravity and the impulse of its wall conditions move it. It meets the other
+/// bodies and the scene's walls in contacts (rapier), and may turn about a hinge.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct RigidBodySpec {
     #[serde(flatten)]
@@ -348,9 +349,39 @@ pub struct RigidBodySpec {
     #[serde(default, with = "friction::optional")]
     #[schemars(schema_with = "friction::optional_schema")]
     pub friction: Option<Real>,
+    /// Coulomb friction coefficient of its contacts with other bodies and the walls; a contact takes the
+    /// larger of its two sides' (a wall's is 0).
+    #[serde(default = "default_contact_friction")]
+    #[schemars(extend("minimum" = 0.0, "unit" = "1"))]
+    pub contact_friction: Real,
+    /// Restitution of its contacts with other bodies and the walls: 0 stops them, 1 bounces elastically;
+    /// a contact takes the larger of its two sides'.
+    #[serde(default)]
+    #[schemars(extend("minimum" = 0.0, "maximum" = 1.0, "unit" = "1"))]
+    pub restitution: Real,
+    /// A point fixed in the scene that the body turns about: an axle, a hinge. Its centre then moves as
+    /// its `angular_velocity` turns it about the hinge (leave `velocity` out).
+    #[serde(default)]
+    #[schemars(extend("unit" = "m", "unbounded" = true))]
+    pub hinge: Option<[Real; 2]>,
+}
+
+fn default_contact_friction() -> Real {
+    0.5
 }
 
 impl RigidBodySpec {
+    /// The initial velocity (m/s) of its centre of mass at `centre` (m): `velocity`, or about its hinge.
+    fn initial_velocity(&self, centre: &Point) -> [Real; 2] {
+        match self.hinge {
+            Some(hinge) => {
+                let r = centre - point(&hinge);
+                [-self.angular_velocity * r.y, self.angular_velocity * r.x]
+            }
+            None => self.velocity,
+        }
+    }
+
     /// Its wall as drawn, its mass (kg/m), polar inertia about its centre of mass (kg·m²/m) and its centre
     /// of mass (m); an error names `key` for a polygon that is not simple and counter-clockwise, or
     /// neither or both of `density` and `mass`.
@@ -743,6 +774,12 @@ impl Scene {
                     format!("not available with moving walls (rigid_bodies[{k}] moves)"),
                 ));
             }
+            if body.hinge.is_some() && body.velocity != [0.0; 2] {
+                return Err(SceneError::new(
+                    format!("rigid_bodies[{k}].velocity"),
+                    "a hinged body's centre moves as its angular_velocity turns it about the hinge; leave velocity out",
+                ));
+            }
         }
         let separate = self.wall_condition == WallCondition::Separate
             || conditions.contains(&WallCondition::Separate)
@@ -883,7 +920,7 @@ impl Scene {
             conditions.push(self.contact(body.condition.unwrap_or(self.wall_condition), body.friction, true));
             motions.push(SurfaceMotion { velocity: Point::zeros(), tangential_speed: 0.0, center: None });
             moves.push(Some(Motion::Constant {
-                velocity: body.velocity,
+                velocity: body.initial_velocity(&centre),
                 angular_velocity: body.angular_velocity,
                 pivot: Some([centre.x, centre.y]),
             }));
@@ -1042,13 +1079,17 @@ impl Scene {
             && materials.iter().any(crate::material::ConstitutiveModel::<2>::needs_grid_density))
         .then(|| crate::step::transfer::wall_fractions(&layout, &region));
         let fastest = region.fastest();
-        let mut bodies = Vec::new();
+        let (mut bodies, mut contacts) = (Vec::new(), Vec::new());
         for (k, spec) in self.rigid_bodies.iter().enumerate() {
             let (_, mass, polar, centre) = spec.solid(&format!("rigid_bodies[{k}]"))?;
             let mut inertia = crate::math::Matrix::<3>::zeros();
             inertia[(2, 2)] = polar;
             bodies.push(RigidBody { wall: self.walls.len() + k, mass, inertia, centre });
+            let hinge = spec.hinge.as_ref().map(point);
+            contacts.push(Contact { friction: spec.contact_friction, restitution: spec.restitution, hinge });
         }
+        let contacts: Option<Box<dyn Contacts<2>>> =
+            (!bodies.is_empty()).then(|| Box::new(Contacts2::new(&region, &bodies, contacts, h)) as _);
         let mut model = Model {
             layout,
             materials,
@@ -1058,6 +1099,7 @@ impl Scene {
             wall_fraction,
             dt: 0.0,
             bodies,
+            contacts,
         };
         let (dt, warning) = self.dt(model.stable_dt(), fastest, h)?;
         model.dt = dt;
@@ -1072,7 +1114,8 @@ impl Scene {
         let mut sim = Simulation::new(model, particles);
         // Each rigid body's wall is posed by the engine from the start, at its initial velocities.
         for (body, spec) in sim.model.bodies.iter().zip(&self.rigid_bodies) {
-            let pose = WallPose::planar(0.0, [0.0, 0.0], 0.0, spec.velocity, spec.angular_velocity);
+            let pose =
+                WallPose::planar(0.0, [0.0, 0.0], 0.0, spec.initial_velocity(&body.centre), spec.angular_velocity);
             sim.state.wall_poses.push((body.wall, pose));
         }
         Ok((sim, warnings))

@@ -798,6 +798,7 @@ impl Scene3 {
             wall_fraction: None,
             dt: 0.0,
             bodies: Vec::new(),
+            contacts: None,
         };
         let (dt, warning) = time_step(&self.time, model.stable_dt(), fastest, h)?;
         model.dt = dt;

@@ -2,6 +2,7 @@
 //! a checkpoint) and the scratch of a step; the step itself, which calls the stages of
 //! [`crate::step`] and the wall treatment ([`crate::treatment`]) in order.
 
+use crate::contact::Contacts;
 use crate::geometry::Region;
 use crate::grid::{GridLayout, GridState, OutOfGrid};
 use crate::material::{ConstitutiveModel, Material};
@@ -9,7 +10,7 @@ use crate::math::{Dim, DimOps, Real, Vector};
 use crate::motion::WallPose;
 use crate::parallel::Disjoint;
 use crate::particles::{Column, ColumnMut, Field, FieldKind, Particles};
-use crate::rigid::RigidBody;
+use crate::rigid::{drift, RigidBody};
 use crate::step::schedule::{Binning, Schedule};
 use crate::step::transfer::{self, G2pOutcome, GridDensity, Transfer};
 use crate::treatment::augmented::WallParticles;
@@ -34,6 +35,9 @@ pub struct Model<const D: usize> {
     pub dt: Real,
     /// The rigid bodies, each moving one of the region's walls.
     pub bodies: Vec<RigidBody<D>>,
+    /// What the bodies meet besides the material (each other, the walls, their hinges); without it they
+    /// move freely between the material's impulses.
+    pub contacts: Option<Box<dyn Contacts<D>>>,
 }
 
 impl<const D: usize> Model<D>
@@ -726,23 +730,33 @@ where
     /// what its wall gave the material over the step ([`RigidBody::advance`]); its wall pose is replaced.
     /// Refused, changing nothing, if a body would move more than a cell in the next step.
     fn advance_bodies(&mut self, step: u64) -> Result<(), StepError> {
+        if self.model.bodies.is_empty() {
+            return Ok(());
+        }
         let (dt, h) = (self.model.dt, self.model.layout.h);
         let t = self.state.time - dt;
-        let mut next = Vec::with_capacity(self.model.bodies.len());
-        for (k, body) in self.model.bodies.iter().enumerate() {
-            let i =
-                self.state.wall_poses.binary_search_by_key(&body.wall, |&(w, _)| w).expect("a body's wall is posed");
-            let pose = &self.state.wall_poses[i].1;
-            let (linear, angular) =
-                (&self.scratch.step_impulse.linear[body.wall], &self.scratch.step_impulse.angular[body.wall]);
-            let moved = body.advance(pose, t, dt, &self.model.gravity, linear, angular);
-            let (_, speed) = self.model.region.pose_change(body.wall, &moved);
+        let index = |poses: &[(usize, WallPose<D>)], wall: usize| {
+            poses.binary_search_by_key(&wall, |&(w, _)| w).expect("a body's wall is posed")
+        };
+        let impulse = &self.scratch.step_impulse;
+        let kicked: Vec<WallPose<D>> = (self.model.bodies.iter())
+            .map(|b| {
+                let pose = &self.state.wall_poses[index(&self.state.wall_poses, b.wall)].1;
+                b.kick(pose, t, dt, &self.model.gravity, &impulse.linear[b.wall], &impulse.angular[b.wall])
+            })
+            .collect();
+        let moved = match &self.model.contacts {
+            Some(contacts) => contacts.drift(t, dt, &self.model.bodies, &kicked, self.model.region.as_ref()),
+            None => kicked.iter().map(|pose| drift(pose, dt)).collect(),
+        };
+        for (k, (body, pose)) in self.model.bodies.iter().zip(&moved).enumerate() {
+            let (_, speed) = self.model.region.pose_change(body.wall, pose);
             if speed * dt > h || speed.is_nan() {
                 return Err(StepError::BodyTooFast { step, body: k, cells: speed * dt / h });
             }
-            next.push((i, moved));
         }
-        for (i, pose) in next {
+        for (body, pose) in self.model.bodies.iter().zip(moved) {
+            let i = index(&self.state.wall_poses, body.wall);
             self.state.wall_poses[i].1 = pose;
         }
         Ok(())

@@ -139,6 +139,7 @@ fn model(layout: GridLayout<3>, region: Box<dyn Region<3>>, boundary: Boundary<3
         wall_fraction: None,
         dt: 0.0,
         bodies: Vec::new(),
+        contacts: None,
     };
     model.dt = 0.4 * model.stable_dt().min(0.2 * h / 3.0);
     model
