@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
+import augmpm
 from augmpm import bench
 from augmpm.scene import load_scene
 
@@ -61,6 +63,25 @@ def test_moving_walls_bench_and_report():
         assert r["moving_over_still"] == pytest.approx(r["seconds"] / r["still_seconds"])
     text = bench.format_report({"machine": bench._machine(1), "quick": True, "rows": rows})
     assert "| shaken_tank | augmented |" in text
+
+
+def test_rigid_coupling_bench_holds_the_bodies_where_they_are(monkeypatch):
+    """The coupling case times the rigid scene with its bodies free against the same state with each body
+    a wall held where the body is: the held walls' outlines are the bodies' (to 1e-12 m), and the report
+    gives both ratios of step times."""
+    monkeypatch.setattr(bench, "RIGID_START", 0.05)
+    scene = bench.load_scene(bench.RIGID_SCENE)
+    free = augmpm.Simulation(scene, "naive")
+    free.step(40)
+    held = augmpm.Simulation(bench._held_walls(scene, free, motion=True), "naive")
+    for body in range(len(scene.walls), len(scene.walls) + len(scene.rigid_bodies)):
+        a, b = free.wall_outlines()[body][0], held.wall_outlines()[body][0]
+        assert a.shape == b.shape and np.abs(a - b).max() < 1e-12
+    rows = bench.bench_rigid(steps=8, threads=1)
+    assert [(r["case"], r["method"]) for r in rows] == [("rigid_coupling", m) for m in bench.METHODS]
+    assert all(r["steps"] == 8 and r["free_over_held"] > 0 and r["free_over_still"] > 0 for r in rows)
+    text = bench.format_report({"machine": bench._machine(1), "quick": True, "rows": rows})
+    assert "| augmented | 3,767 | 8 |" in text
 
 
 def test_memory_is_measured_in_a_fresh_process():

@@ -12,7 +12,10 @@ Cases (issue 5):
 - a 3D fluid dam break in a box tank turned 20° about an axis in no coordinate plane, ~20k particles
   on 32³, ~160k on 64³ and ~1M on 128³: f64 and f32, naive and augmented, on the chosen threads;
 - the cost of output: a paper-scene run with every output (frames, images, animation) against the
-  same run without.
+  same run without;
+- the cost of coupling rigid bodies (issue 15): ``rigid/floating_bodies`` from its state at 1 s, with its
+  bodies free against the same state with each body replaced by a wall held where the body is (a wall
+  that may move but stands still, and a still wall).
 
 Configurations compared with each other run interleaved in one process (A B A B …), because this
 machine's speed drifts by up to 2× over an hour; memory is measured in a fresh process per
@@ -329,6 +332,64 @@ def bench_output(path: Path, steps: int, threads: int) -> list[dict]:
     return rows
 
 
+#: The shipped scene whose rigid bodies are timed free and held, and when (s) the timing starts.
+RIGID_SCENE, RIGID_START = "rigid/floating_bodies", 1.0
+
+
+def _held_walls(scene: Scene, sim: Simulation, motion: bool) -> Scene:
+    """``scene`` with each rigid body turned into an obstacle wall where ``sim`` has it now (held by a
+    motion that stands still when ``motion``, else a still wall)."""
+    import numpy as np
+
+    data = scene.model_dump(mode="json", exclude_none=True)
+    walls = data["walls"]
+    for spec, (x, y, angle, *_) in zip(scene.rigid_bodies, sim.rigid_bodies, strict=True):
+        body = spec.model_dump()
+        if body["shape"] == "circle":
+            wall = {"type": "circle", "center": [x, y], "radius": body["radius"], "side": "outside"}
+        else:
+            v = np.array(body["vertices"])
+            cross = v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1]
+            centroid = ((v + np.roll(v, -1, axis=0)) * cross[:, None]).sum(axis=0) / (3 * cross.sum())
+            c, s = math.cos(angle), math.sin(angle)
+            placed = (v - centroid) @ np.array([[c, s], [-s, c]]) + [x, y]
+            wall = {"type": "polygon", "vertices": placed.tolist(), "side": "outside"}
+        if motion:
+            wall["motion"] = {"type": "constant", "velocity": [0.0, 0.0]}
+        walls.append(wall)
+    return Scene.from_dict({**data, "rigid_bodies": []})
+
+
+def bench_rigid(steps: int, threads: int) -> list[dict]:
+    """The cost of two-way coupling: :data:`RIGID_SCENE` from its state at :data:`RIGID_START` with its
+    bodies free, against the same state with the bodies held where they are (walls that may move, and
+    still walls), both methods, interleaved; the ratio of their step times."""
+    scene = load_scene(RIGID_SCENE)
+    rows = []
+    for m in METHODS:
+        free = Simulation(scene, m, threads=threads)
+        free.step(round(RIGID_START / free.dt))
+        state = free.checkpoint()
+        sims = {"free": free}
+        for label, motion in (("held", True), ("still", False)):
+            sims[label] = Simulation(_held_walls(scene, free, motion), m, threads=threads)
+            # The material's state as it is; the bodies' poses stay with the free run.
+            sims[label].restore({**state, "wall_pose": state["wall_pose"][:0]})
+        result = interleaved(sims, steps, rounds=4)
+        per_step = {k: r["seconds"] / r["steps"] if r["steps"] else math.nan for k, r in result.items()}
+        rows.append(
+            {
+                "case": "rigid_coupling",
+                "method": m,
+                "threads": threads,
+                **result["free"],
+                "free_over_held": per_step["free"] / per_step["held"],
+                "free_over_still": per_step["free"] / per_step["still"],
+            }
+        )
+    return rows
+
+
 def run_bench(
     quick: bool = False,
     fig1: Path = DEFAULT_FIG1,
@@ -360,6 +421,9 @@ def run_bench(
     moving_steps = 300 if quick else 1_500
     log(f"moving walls ({', '.join(MOVING_SCENES)}), {moving_steps} steps, moving and still …")
     report["rows"] += bench_moving(moving_steps, threads)
+    rigid_steps = 300 if quick else 1_500
+    log(f"rigid bodies ({RIGID_SCENE}), {rigid_steps} steps, free and held …")
+    report["rows"] += bench_rigid(rigid_steps, threads)
     log("output cost (fig1 with frames, images and animation) …")
     report["rows"] += bench_output(fig1, 1_000 if quick else FIG1_STEPS, threads)
     return report
@@ -443,6 +507,16 @@ def format_report(report: dict) -> str:
             lines.append(
                 f"| {r['case'].removeprefix('moving_')} | {r['method']} | {r['particles']:,} | {r['steps']} "
                 f"| {r['moving_over_still']:.2f}× |"
+            )
+        lines.append("")
+    rigid = [r for r in report["rows"] if r["case"] == "rigid_coupling"]
+    if rigid:
+        lines += ["| rigid bodies (floating_bodies from 1 s) | particles | steps | free / held | free / still walls |"]
+        lines += ["|---|---|---|---|---|"]
+        for r in rigid:
+            lines.append(
+                f"| {r['method']} | {r['particles']:,} | {r['steps']} "
+                f"| {r['free_over_held']:.2f}× | {r['free_over_still']:.2f}× |"
             )
         lines.append("")
     out = [r for r in report["rows"] if r["case"] == "output"]
