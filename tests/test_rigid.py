@@ -3,7 +3,6 @@ engine poses from gravity and the impulse its wall conditions give the material.
 
 from __future__ import annotations
 
-import math
 import shutil
 
 import numpy as np
@@ -11,7 +10,7 @@ import pytest
 
 import augmpm
 from augmpm.run import BODY_COLUMNS, resume_run, run_scene
-from augmpm.scene import load_scene
+from augmpm.validation import rigid
 
 G = 9.81
 WATER = {"type": "fluid", "density": 1000.0, "stiffness": 3e4, "viscosity": 5.0}
@@ -35,74 +34,6 @@ def _scene(rigid: list[dict], resolution: int = 48, end: float = 2.0, **keys) ->
     return augmpm.Scene.from_dict(scene)
 
 
-def _clip_below(polygon: np.ndarray, level: float) -> float:
-    """Area of the part of ``polygon`` (counter-clockwise, (n, 2)) below y = ``level``."""
-    out = []
-    for a, b in zip(polygon, np.roll(polygon, -1, axis=0), strict=True):
-        if a[1] <= level:
-            out.append(a)
-        if (a[1] - level) * (b[1] - level) < 0:
-            out.append(a + (b - a) * (level - a[1]) / (b[1] - a[1]))
-    if len(out) < 3:
-        return 0.0
-    x, y = np.array(out).T
-    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
-
-
-def _mass_and_inertia(body) -> tuple[float, float]:
-    """Mass (kg/m) and moment of inertia about the centre of mass (kg·m²/m) of a ``rigid_bodies`` entry of
-    uniform density: a disk's ½ m r², a polygon's from the shoelace sums."""
-    if body.shape == "circle":
-        mass = body.density * math.pi * body.radius**2
-        return mass, 0.5 * mass * body.radius**2
-    x, y = np.array(body.vertices).T
-    xn, yn = np.roll(x, -1), np.roll(y, -1)
-    cross = x * yn - xn * y
-    area = cross.sum() / 2
-    c = np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6 * area)
-    polar = (cross * (x**2 + x * xn + xn**2 + y**2 + y * yn + yn**2)).sum() / 12
-    return body.density * area, body.density * (polar - area * c @ c)
-
-
-def _energy(sim: augmpm.Simulation) -> float:
-    """Kinetic and potential energy (J/m) of the material and the rigid bodies (gravity along −y)."""
-    m, x, v = sim.masses, sim.positions, sim.velocities
-    total = 0.5 * np.sum(m * (v**2).sum(axis=1)) + G * np.sum(m * x[:, 1])
-    for spec, (_, y, _, vx, vy, w) in zip(sim.scene.rigid_bodies, sim.rigid_bodies, strict=True):
-        mass, inertia = _mass_and_inertia(spec)
-        total += 0.5 * mass * (vx * vx + vy * vy) + 0.5 * inertia * w * w + mass * G * y
-    return float(total)
-
-
-def _shipped(name: str, resolution: int) -> augmpm.Simulation:
-    """The shipped scene ``rigid/<name>`` on a coarser grid, augmented."""
-    scene = load_scene(f"rigid/{name}")
-    grid = scene.grid.model_copy(update={"resolution": resolution})
-    return augmpm.Simulation(scene.model_copy(update={"grid": grid}), "augmented")
-
-
-def _run(sim: augmpm.Simulation, end: float, every: float = 0.02) -> list[tuple[float, int, float]]:
-    """Runs ``sim`` to ``end`` (s); every ``every`` s the time, the particles outside the walls (inside a
-    body included) and the energy (:func:`_energy`)."""
-    rows = []
-    while sim.time < end - 1e-9:
-        sim.step(max(1, round(every / sim.dt)))
-        rows.append((sim.time, sim.metrics()["n_outside"], _energy(sim)))
-    return rows
-
-
-def _water_level(sim: augmpm.Simulation, away_from: float) -> float:
-    """The free surface (m): the mean height of the top particle of each 2 cm column farther than 16 cm from
-    x = ``away_from``, plus half the particles' spacing (h/2 at 4 particles per cell)."""
-    x = sim.positions
-    tops = [
-        x[(x[:, 0] > a) & (x[:, 0] < a + 0.02), 1].max()
-        for a in np.arange(0.12, 0.88, 0.02)
-        if abs(a + 0.01 - away_from) >= 0.16
-    ]
-    return float(np.mean(tops)) + 0.25 * sim.cell_size
-
-
 def test_a_box_half_as_dense_as_water_floats():
     """A box of density ρ/2 dropped onto water in a tank whose floor is at an angle to the grid floats: it
     comes nearly to rest across the surface (0.15 cell of motion over the last 0.5 s of 3 s measured;
@@ -118,12 +49,7 @@ def test_a_box_half_as_dense_as_water_floats():
         heights.append(sim.rigid_bodies[0][1])
     assert outside == 0
     assert np.ptp(heights[-10:]) < 0.25 * sim.cell_size
-    x, y, angle = sim.rigid_bodies[0][:3]
-    c, s = math.cos(angle), math.sin(angle)
-    drawn = np.array(BOX)
-    placed = (drawn - drawn.mean(axis=0)) @ np.array([[c, s], [-s, c]]) + [x, y]
-    submerged = _clip_below(placed, _water_level(sim, x)) / _clip_below(placed, 10.0)
-    assert 0.4 < submerged < 0.7
+    assert 0.4 < rigid.submerged(sim) < 0.7
 
 
 def test_a_body_out_of_reach_of_the_material_falls_freely():
@@ -148,39 +74,10 @@ def test_material_and_body_exchange_momentum_exactly(method):
     m_p h²/4 (C_yx − C_xy)) + x_b × m_b v_b + I_b ω_b, to round-off with the naive walls (1e-12) and
     within 1e-4 with the augmented grid (4e-5 measured: its G2P near walls is not P2G's transpose).
     The body is pushed: it ends up moving at more than 0.1 m/s."""
-    quad = np.array([[0.5, 0.40], [0.6, 0.42], [0.58, 0.62], [0.48, 0.58]])
-    scene = {
-        "gravity": [0.0, 0.0],
-        "grid": {"domain": [1.0, 1.0], "resolution": 64},
-        "time": {"cfl": 0.4, "steps": 600, "output_interval": 100},
-        "wall_condition": "slip",
-        "bodies": [
-            {
-                "shape": "circle",
-                "center": [0.3, 0.45],
-                "radius": 0.08,
-                "velocity": [1.0, 0.2],
-                "material": {**WATER, "viscosity": 1.0},
-            }
-        ],
-        "rigid_bodies": [{"shape": "polygon", "vertices": quad.tolist(), "density": 800.0}],
-    }
-    sim = augmpm.Simulation(augmpm.Scene.from_dict(scene), method)
-    mass, inertia = _mass_and_inertia(sim.scene.rigid_bodies[0])
-    h = 1 / 64
-
-    def totals():
-        st = sim.checkpoint()
-        xp, vp, mp, cp = st["x"], st["v"], st["mass"], st["c"].reshape(-1, 2, 2)
-        bx, by, _, bvx, bvy, bw = sim.rigid_bodies[0]
-        p = (mp[:, None] * vp).sum(axis=0) + mass * np.array([bvx, bvy])
-        spin = np.sum(mp * h * h / 4 * (cp[:, 1, 0] - cp[:, 0, 1]))
-        orbit = np.sum(mp * (xp[:, 0] * vp[:, 1] - xp[:, 1] * vp[:, 0]))
-        return p, orbit + spin + mass * (bx * bvy - by * bvx) + inertia * bw
-
-    p0, l0 = totals()
+    sim = rigid.thrown_disk(method, 64, 600)
+    p0, l0 = rigid.momenta(sim)
     sim.step(600)
-    p1, l1 = totals()
+    p1, l1 = rigid.momenta(sim)
     assert np.abs(p1 - p0).max() < 1e-13 * np.abs(p0).max()
     assert abs(l1 - l0) < (1e-12 if method == "naive" else 1e-4) * abs(l0)
     assert np.linalg.norm(sim.rigid_bodies[0][3:5]) > 0.1
@@ -273,9 +170,9 @@ def test_a_ball_dropped_into_snow_stays_clear_of_it_and_loses_energy():
     it the total energy of snow and ball (kinetic and potential) never rises above the start's (asserted:
     never more than 0.01 J/m above) and has lost more than 10 J/m by the end (54 J/m measured; the ball
     brought 45 J/m of kinetic and potential energy above the snow)."""
-    sim = _shipped("ball_into_snow", 32)
-    e0 = _energy(sim)
-    rows = _run(sim, 0.6)
+    sim = rigid.shipped("ball_into_snow", "augmented", 32)
+    e0 = rigid.energy(sim)
+    rows = rigid.sampled(sim, 0.6)
     assert max(r[1] for r in rows) == 0
     assert max(r[2] for r in rows) - e0 < 0.01
     assert rows[-1][2] - e0 < -10.0
@@ -286,8 +183,8 @@ def test_a_piston_pushes_a_box_under_water_and_holds_it():
     floating box (rigid contact with a moving wall) and holds it under water. No water is inside the box or
     the plate at any sample; at the end the box's top is pressed against the plate's underside (0.22 m)
     within 0.1 cell (0.03 cell measured), and once the plate stops the total energy never rises."""
-    sim = _shipped("piston_box", 32)
-    rows = _run(sim, 1.6)
+    sim = rigid.shipped("piston_box", "augmented", 32)
+    rows = rigid.sampled(sim, 1.6)
     assert max(r[1] for r in rows) == 0
     top = sim.rigid_bodies[0][1] + 0.04
     assert abs(top - 0.22) < 0.1 * sim.cell_size
@@ -298,8 +195,8 @@ def test_a_piston_pushes_a_box_under_water_and_holds_it():
 def test_a_water_wheel_turns_on_its_axle():
     """Joints: ``rigid/water_wheel`` (32 cells, 1 s): the stream turns the wheel by more than a radian while
     its centre stays on the axle (within 1e-6 m), and no water enters it."""
-    sim = _shipped("water_wheel", 32)
-    rows = _run(sim, 1.0, every=0.05)
+    sim = rigid.shipped("water_wheel", "augmented", 32)
+    rows = rigid.sampled(sim, 1.0, every=0.05)
     x, y, angle = sim.rigid_bodies[0][:3]
     assert max(r[1] for r in rows) == 0
     assert abs(x - 0.6) < 1e-6 and abs(y - 0.32) < 1e-6

@@ -23,6 +23,7 @@ from augmpm.validation import (
     interpolation,
     interpolation3d,
     moving,
+    rigid,
     rotation,
 )
 from augmpm.validation.records import Record
@@ -157,6 +158,7 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
     plots.append(("Block on a rough incline", _plot_simple(out, "incline_friction.png", draw_rough)))
 
     stage("walls that move (containers carried, turned, shaken; a piston)", lambda: moving.run(quick))
+    stage("rigid bodies (momentum exchanged, floating, impacts)", lambda: rigid.run(quick))
 
     hyd = stage("hydrostatic column", lambda: hydrostatic.run(quick, angles))
 
