@@ -69,6 +69,15 @@ _WALLS3 = [
 ]
 
 
+_RIGID3 = [
+    {"shape": "box", "center": [0.6, 0.5, 0.5], "size": [0.1, 0.1, 0.1], "axis": [1.0, 0.0, 0.0], "angle": 0.3,
+     "density": 500.0},
+    {"shape": "sphere", "center": [0.3, 0.6, 0.3], "radius": 0.05, "mass": 0.2},
+    {"shape": "cylinder", "center": [0.6, 0.7, 0.3], "axis": [1.0, 0.0, 0.0], "radius": 0.04, "length": 0.1,
+     "density": 400.0},
+]  # fmt: skip
+
+
 def _scenes3() -> list[dict[str, Any]]:
     """Valid 3D scenes that together hold every kind of table the 3D schema declares."""
     return [
@@ -77,6 +86,7 @@ def _scenes3() -> list[dict[str, Any]]:
             "time": {"dt": 1e-4, "steps": 2, "output_interval": 1},
             "walls": copy.deepcopy(_WALLS3),
             "bodies": [{**copy.deepcopy(body), "material": dict(material), "seeding": {"per_cell": 8}}],
+            "rigid_bodies": copy.deepcopy(_RIGID3),
         }
         for material, body in zip(_MATERIALS.values(), _BODIES3, strict=True)
     ]

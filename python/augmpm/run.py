@@ -3,7 +3,7 @@
 Layout of DIR: ``scene.toml`` (the resolved scene), ``metrics.csv`` (one row per
 output frame: :data:`METRIC_COLUMNS`, then the force on each wall, :func:`wall_force_columns`, then each
 rigid body's state, :func:`rigid_body_columns`), ``bodies.csv`` (with rigid bodies: one row per frame and
-body, :data:`BODY_COLUMNS`), ``particles/frame_00000.npz`` (``x``, ``v``, ``body``; ``rigid_bodies``),
+body, :func:`body_columns`), ``particles/frame_00000.npz`` (``x``, ``v``, ``body``; ``rigid_bodies``),
 ``frames/frame_00000.png``, ``vtk/frame_00000.vtp`` with ``particles.pvd`` (and the walls: ``vtk/walls/walls.vtp``,
 or per frame ``vtk/walls/frame_00000.vtp`` with ``walls.pvd`` when walls move),
 ``animation.mp4`` (or ``.gif``), and ``checkpoint.npz`` (the state at the last
@@ -65,12 +65,23 @@ def wall_force_columns(walls: int, dim: int = 2) -> list[str]:
 #: where the scene draws it (rad, counter-clockwise), their rates (m/s, rad/s), and the mean force (N per
 #: metre of depth) the material put on it over the output interval that ends at the row (0 in the first row).
 BODY_COLUMNS = ["x", "y", "angle", "vx", "vy", "angular_velocity", "force_x", "force_y"]
+#: The same in 3D: the turn as a rotation vector (rad: about its direction, by its length), the angular
+#: velocity as a vector (rad/s), the force in N.
+BODY_COLUMNS_3D = [
+    *("x", "y", "z", "angle_x", "angle_y", "angle_z", "vx", "vy", "vz"),
+    *("angular_velocity_x", "angular_velocity_y", "angular_velocity_z", "force_x", "force_y", "force_z"),
+]
 
 
-def rigid_body_columns(bodies: int) -> list[str]:
+def body_columns(dim: int) -> list[str]:
+    """:data:`BODY_COLUMNS` in 2D, :data:`BODY_COLUMNS_3D` in 3D."""
+    return BODY_COLUMNS if dim == 2 else BODY_COLUMNS_3D
+
+
+def rigid_body_columns(bodies: int, dim: int = 2) -> list[str]:
     """The columns of ``metrics.csv`` after the wall forces: ``rigid_<k>_<c>`` for each of ``bodies`` rigid
-    bodies and each column ``c`` of :data:`BODY_COLUMNS`."""
-    return [f"rigid_{k}_{c}" for k in range(bodies) for c in BODY_COLUMNS]
+    bodies and each column ``c`` of :func:`body_columns`."""
+    return [f"rigid_{k}_{c}" for k in range(bodies) for c in body_columns(dim)]
 
 
 CHECKPOINT = "checkpoint.npz"
@@ -217,11 +228,13 @@ class _Run:
         # (vtk/walls/walls.vtp).
         outlines = sim.wall_outlines()
         # 3D walls are written and drawn as their surface points: in each frame where some move.
-        self.walls_move_3d = sim.dim == 3 and any(getattr(w, "motion", None) is not None for w in sim.scene.walls)
+        self.walls_move_3d = sim.dim == 3 and (
+            any(getattr(w, "motion", None) is not None for w in sim.scene.walls) or bool(sim.scene.rigid_bodies)
+        )
         self.walls = any(moving for _, moving in outlines) or self.walls_move_3d
         self.columns = METRIC_COLUMNS + wall_force_columns(len(sim.wall_impulse) - 1, sim.dim)
         self.bodies = len(getattr(sim.scene, "rigid_bodies", []))
-        self.columns += rigid_body_columns(self.bodies)
+        self.columns += rigid_body_columns(self.bodies, sim.dim)
         # The walls' impulses at the last row, from which the next row's forces are measured.
         self.impulse_at = (sim.wall_impulse.copy(), sim.time)
         self.wall_frames = [(t, f.replace("vtk/", "vtk/walls/")) for t, f in self.vtk_frames] if self.walls else []
@@ -321,7 +334,7 @@ class _Run:
         row = {k: m[k] for k in METRIC_COLUMNS}
         impulse, (last, since) = sim.wall_impulse, self.impulse_at
         force = -(impulse - last) / (sim.time - since) if sim.time > since else np.zeros_like(impulse)
-        forces = self.columns[len(METRIC_COLUMNS) : len(self.columns) - len(rigid_body_columns(self.bodies))]
+        forces = self.columns[len(METRIC_COLUMNS) : len(self.columns) - len(rigid_body_columns(self.bodies, sim.dim))]
         row |= dict(zip(forces, map(float, force.ravel()), strict=True))
         if self.bodies:
             row |= self._body_columns(force)
@@ -337,11 +350,11 @@ class _Run:
     def _body_columns(self, force: np.ndarray) -> dict[str, float]:
         """Each rigid body's row entries: its state now, and the mean force the material put on it (its
         wall's row of ``force``, the walls' mean forces over the interval)."""
-        first = len(self.sim.scene.walls)
+        first, columns = len(self.sim.scene.walls), body_columns(self.sim.dim)
         row = {}
         for k, state in enumerate(self.sim.rigid_bodies):
-            values = [*map(float, state), float(force[first + k, 0]), float(force[first + k, 1])]
-            row |= {f"rigid_{k}_{c}": v for c, v in zip(BODY_COLUMNS, values, strict=True)}
+            values = [*map(float, state), *map(float, force[first + k])]
+            row |= {f"rigid_{k}_{c}": v for c, v in zip(columns, values, strict=True)}
         return row
 
     def commit(self, wait: bool = False, rewrite: bool = False) -> None:
@@ -366,11 +379,12 @@ class _Run:
     def _write_bodies(self) -> None:
         """``bodies.csv``: the rigid bodies' columns of the committed rows, one row per frame and body."""
         buf = io.StringIO()
-        writer = csv.DictWriter(buf, fieldnames=["frame", "step", "time", "body", *BODY_COLUMNS], lineterminator="\r\n")
+        columns = body_columns(self.sim.dim)
+        writer = csv.DictWriter(buf, fieldnames=["frame", "step", "time", "body", *columns], lineterminator="\r\n")
         writer.writeheader()
         for frame, row in enumerate(self.rows):
             for k in range(self.bodies):
-                state = {c: row[f"rigid_{k}_{c}"] for c in BODY_COLUMNS}
+                state = {c: row[f"rigid_{k}_{c}"] for c in columns}
                 writer.writerow({"frame": frame, "step": row["step"], "time": row["time"], "body": k, **state})
         write_text(self.out / "bodies.csv", buf.getvalue())
 

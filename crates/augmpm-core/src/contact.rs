@@ -12,12 +12,19 @@
 //! the next (no warm start); at MPM's steps (~1e-4 s) the solver's own iterations suffice. Rapier runs on
 //! one thread, so its result does not depend on the thread count.
 //!
-//! The contact surfaces:
+//! The contact surfaces in 2D (`Contacts2`, rapier2d):
 //! - a body: its drawn solid (a disk, a convex polygon, or the convex pieces of a concave one);
 //! - a container polygon and the domain box: closed polylines (hollow: bodies stay inside);
 //! - an obstacle polygon: a solid as a body is;
 //! - a circle: a disk, or around material a ring of segments at most a cell long;
 //! - a stroke: capsules along its centreline.
+//!
+//! In 3D (`Contacts3`, rapier3d):
+//! - a body, or an obstacle wall: its drawn solid (a box, a ball, a capped cylinder; a mesh as its
+//!   triangles);
+//! - a container (a box, sphere, cylinder or mesh the material is inside) and a thin mesh wall: its
+//!   surface as triangles (hollow);
+//! - a plane: the half-space past it; the domain box: its six faces' half-spaces.
 //!
 //! Friction and restitution are the bodies' (`contact_friction`, `restitution`). A wall's own are 0, and
 //! each contact takes the larger of its two sides' values.
@@ -27,9 +34,12 @@
 
 use rapier2d_f64::na::{Isometry2, Point2, Vector2};
 use rapier2d_f64::prelude as rp;
+use rapier3d_f64::na::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use rapier3d_f64::prelude as rp3;
 
 use crate::geometry::{Point, Region, Side, WallShape, Walls2};
-use crate::math::{Real, PI};
+use crate::geometry3::{Solid, Wall3, Walls3};
+use crate::math::{Matrix, Real, Vector, PI};
 use crate::motion::WallPose;
 use crate::rigid::RigidBody;
 
@@ -241,5 +251,217 @@ fn surface(shape: &WallShape, origin: &Point, h: Real) -> rp::SharedShape {
                 })
                 .collect(),
         ),
+    }
+}
+
+/// The contacts of a 3D scene's rigid bodies, through rapier.
+pub struct Contacts3 {
+    /// The scene's walls: each one's index among the region's walls, its surface placed relative to its
+    /// pivot (the shape and where it sits in the pivot's frame), and the pivot (m, where the scene draws it).
+    walls: Vec<(usize, rp3::SharedShape, Isometry3<f64>, Vector3<f64>)>,
+    /// The domain box's far corner (m).
+    extent: Vector3<f64>,
+    /// Each body's surface placed relative to its centre of mass as drawn, and how it meets others.
+    bodies: Vec<(rp3::SharedShape, Isometry3<f64>, Contact)>,
+    /// The grid spacing (m): rapier's length unit.
+    h: f64,
+}
+
+impl Contacts3 {
+    /// The contacts of `bodies` (whose walls are the last of `region`'s) in `region`, on a grid of
+    /// spacing `h` (m). Hinges are 2D only.
+    pub fn new(region: &Walls3, bodies: &[RigidBody<3>], contacts: Vec<Contact>, h: Real) -> Self {
+        let first_body = bodies.iter().map(|b| b.wall).min().unwrap_or(region.walls.len());
+        let walls = (0..first_body)
+            .map(|w| {
+                let pivot = region.pivot(w);
+                let (shape, at) = surface3(&region.walls[w], &pivot, h);
+                (w, shape, at, pivot.map(|c| c as f64))
+            })
+            .collect();
+        let bodies = bodies
+            .iter()
+            .zip(contacts)
+            .map(|(b, c)| {
+                let (shape, at) = surface3(&region.walls[b.wall], &b.centre, h);
+                (shape, at, c)
+            })
+            .collect();
+        Self { walls, extent: region.extent().map(|c| c as f64), bodies, h: h as f64 }
+    }
+}
+
+impl Contacts<3> for Contacts3 {
+    fn drift(
+        &self,
+        t: Real,
+        dt: Real,
+        bodies: &[RigidBody<3>],
+        kicked: &[WallPose<3>],
+        region: &dyn Region<3>,
+    ) -> Vec<WallPose<3>> {
+        let mut set = rp3::RigidBodySet::new();
+        let mut colliders = rp3::ColliderSet::new();
+        // A wall's friction and restitution are 0, so that each contact takes its body's.
+        let collider = |shape: &rp3::SharedShape, at: &Isometry3<f64>, friction: Real, restitution: Real| {
+            rp3::ColliderBuilder::new(shape.clone())
+                .position(*at)
+                .density(0.0)
+                .friction(friction as f64)
+                .restitution(restitution as f64)
+                .friction_combine_rule(rp3::CoefficientCombineRule::Max)
+                .restitution_combine_rule(rp3::CoefficientCombineRule::Max)
+        };
+        let turned = |turn: &[Real; 3]| UnitQuaternion::from_scaled_axis(Vector3::from(*turn).map(|c| c as f64));
+        for (wall, shape, at, pivot) in &self.walls {
+            let handle = match region.placement(*wall) {
+                Some(p) => {
+                    let place = |k: usize| {
+                        let x = (p.pivot + p.offset[k]).map(|c| c as f64);
+                        Isometry3::from_parts(Translation3::from(x), turned(&p.turn[k]))
+                    };
+                    let handle = set.insert(rp3::RigidBodyBuilder::kinematic_position_based().position(place(0)));
+                    set[handle].set_next_kinematic_position(place(1));
+                    handle
+                }
+                None => set.insert(rp3::RigidBodyBuilder::fixed().translation(*pivot)),
+            };
+            colliders.insert_with_parent(collider(shape, at, 0.0, 0.0), handle, &mut set);
+        }
+        // The domain box: the half-spaces past its six faces.
+        let ground = set.insert(rp3::RigidBodyBuilder::fixed());
+        for k in 0..3 {
+            for (corner, outward) in [(0.0, -1.0), (self.extent[k], 1.0)] {
+                let mut normal = Vector3::zeros();
+                normal[k] = -outward;
+                let mut x = Vector3::zeros();
+                x[k] = corner;
+                let face = rp3::SharedShape::halfspace(nalgebra::Unit::new_normalize(normal));
+                colliders.insert_with_parent(
+                    collider(&face, &Isometry3::translation(x.x, x.y, x.z), 0.0, 0.0),
+                    ground,
+                    &mut set,
+                );
+            }
+        }
+        let handles: Vec<_> = bodies
+            .iter()
+            .zip(kicked)
+            .zip(&self.bodies)
+            .map(|((body, pose), (shape, at, contact))| {
+                let centre = (body.centre + pose.offset(t)).map(|c| c as f64);
+                let inertia = body.inertia.map(|c| c as f64);
+                let mass = rp3::MassProperties::with_inertia_matrix(Point3::origin(), body.mass as f64, inertia);
+                let builder = rp3::RigidBodyBuilder::dynamic()
+                    .position(Isometry3::from_parts(Translation3::from(centre), turned(&pose.turn(t))))
+                    .linvel(Vector3::from(pose.velocity).map(|c| c as f64))
+                    .angvel(Vector3::from(pose.angular_velocity).map(|c| c as f64))
+                    .additional_mass_properties(mass)
+                    .can_sleep(false);
+                let handle = set.insert(builder);
+                colliders.insert_with_parent(
+                    collider(shape, at, contact.friction, contact.restitution),
+                    handle,
+                    &mut set,
+                );
+                handle
+            })
+            .collect();
+        let params = rp3::IntegrationParameters { dt: dt as f64, length_unit: self.h, ..Default::default() };
+        rp3::PhysicsPipeline::new().step(
+            &Vector3::zeros(),
+            &params,
+            &mut rp3::IslandManager::new(),
+            &mut rp3::DefaultBroadPhase::new(),
+            &mut rp3::NarrowPhase::new(),
+            &mut set,
+            &mut colliders,
+            &mut rp3::ImpulseJointSet::new(),
+            &mut rp3::MultibodyJointSet::new(),
+            &mut rp3::CCDSolver::new(),
+            &(),
+            &(),
+        );
+        bodies
+            .iter()
+            .zip(handles)
+            .map(|(body, handle)| {
+                let moved = &set[handle];
+                let (x, v, w) = (moved.translation(), moved.linvel(), moved.angvel());
+                let turn = moved.rotation().scaled_axis();
+                WallPose {
+                    time: t + dt,
+                    position: std::array::from_fn(|k| x[k] as Real - body.centre[k]),
+                    angle: std::array::from_fn(|k| turn[k] as Real),
+                    velocity: std::array::from_fn(|k| v[k] as Real),
+                    angular_velocity: std::array::from_fn(|k| w[k] as Real),
+                }
+            })
+            .collect()
+    }
+}
+
+/// A 3D vector in f64.
+fn wide3(v: &Vector<3>) -> Vector3<f64> {
+    v.map(|c| c as f64)
+}
+
+/// A rotation of f64 from a matrix of `Real` (orthonormal columns).
+fn rotation(axes: &Matrix<3>) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(axes.map(|c| c as f64)))
+}
+
+/// The contact surface of a 3D wall or body drawn as `wall`, placed relative to `origin` (m); the surfaces
+/// of containers as triangles, spheres and cylinders with at least one triangle per cell `h` (m) around.
+fn surface3(wall: &Wall3, origin: &Vector<3>, h: Real) -> (rp3::SharedShape, Isometry3<f64>) {
+    let at = |centre: &Vector<3>, r: UnitQuaternion<f64>| {
+        Isometry3::from_parts(Translation3::from(wide3(&(centre - origin))), r)
+    };
+    let around = |radius: Real| ((2.0 * PI * radius / h).ceil() as u32).max(16);
+    let mesh = |(vertices, triangles): (Vec<Point3<f64>>, Vec<[u32; 3]>), place: Isometry3<f64>| {
+        let placed = vertices.iter().map(|p| place * p).collect();
+        (rp3::SharedShape::trimesh(placed, triangles).expect("a closed surface"), Isometry3::identity())
+    };
+    let inside = wall.side == Side::Inside;
+    match &wall.solid {
+        // The material is inside the half-space; bodies stay out of the rest.
+        Solid::HalfSpace { point, normal } => (
+            rp3::SharedShape::halfspace(nalgebra::Unit::new_normalize(-wide3(normal))),
+            at(point, UnitQuaternion::identity()),
+        ),
+        Solid::Box { centre, half, axes } => {
+            let cuboid = rapier3d_f64::parry::shape::Cuboid::new(wide3(half));
+            if inside {
+                mesh(cuboid.to_trimesh(), at(centre, rotation(axes)))
+            } else {
+                (rp3::SharedShape::new(cuboid), at(centre, rotation(axes)))
+            }
+        }
+        Solid::Sphere { centre, radius } => {
+            let ball = rapier3d_f64::parry::shape::Ball::new(*radius as f64);
+            if inside {
+                let n = around(*radius);
+                mesh(ball.to_trimesh(n / 2, n), at(centre, UnitQuaternion::identity()))
+            } else {
+                (rp3::SharedShape::new(ball), at(centre, UnitQuaternion::identity()))
+            }
+        }
+        Solid::Cylinder { centre, axis, radius, half_length } => {
+            // parry's cylinder runs along its y axis.
+            let r = UnitQuaternion::rotation_between(&Vector3::y(), &wide3(axis))
+                .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI));
+            let cylinder = rapier3d_f64::parry::shape::Cylinder::new(*half_length as f64, *radius as f64);
+            if inside {
+                mesh(cylinder.to_trimesh(around(*radius)), at(centre, r))
+            } else {
+                (rp3::SharedShape::new(cylinder), at(centre, r))
+            }
+        }
+        Solid::Mesh(m) | Solid::Shell { mesh: m, .. } => {
+            let (vertices, triangles) = m.triangles();
+            let shift = -wide3(origin);
+            let points = vertices.iter().map(|v| Point3::from(v + shift)).collect();
+            (rp3::SharedShape::trimesh(points, triangles.to_vec()).expect("a closed mesh"), Isometry3::identity())
+        }
     }
 }

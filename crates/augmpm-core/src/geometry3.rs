@@ -7,7 +7,7 @@
 //! two and three normals), latitude rings on spheres, rings along cylinders and on their caps, and
 //! Poisson-disk samples on triangle meshes ([`crate::mesh`]).
 
-use crate::geometry::{Region, Side, WallDistance, WallFeet, WallFoot};
+use crate::geometry::{Placement, Region, Side, WallDistance, WallFeet, WallFoot};
 use crate::math::{Matrix, Real, Vector};
 use crate::mesh::TriangleMesh;
 use crate::motion::{Motion3, Pose3, WallPose};
@@ -402,6 +402,11 @@ impl Walls3 {
         self.walls.len()
     }
 
+    /// The domain box's far corner (m); its near corner is the origin.
+    pub fn extent(&self) -> P3 {
+        self.extent
+    }
+
     /// The farthest distance (m) of wall `wall`'s points from its pivot.
     fn reach(&self, wall: usize) -> Real {
         self.walls[wall].solid.reach_from(&self.now[wall].pivot)
@@ -425,7 +430,7 @@ impl Walls3 {
     }
 
     /// The point wall `wall` turns about: its motion's pivot, else its centre as drawn.
-    fn pivot(&self, wall: usize) -> P3 {
+    pub fn pivot(&self, wall: usize) -> P3 {
         let centre = self.walls[wall].solid.centre();
         self.moves[wall].as_ref().and_then(Motion3::pivot).map_or(centre, P3::from)
     }
@@ -627,6 +632,13 @@ impl Region<3> for Walls3 {
 
     fn is_moving(&self, wall: usize) -> bool {
         self.driven(wall)
+    }
+
+    fn placement(&self, wall: usize) -> Option<Placement<3>> {
+        let turn =
+            |p: &Pose3| -> [Real; 3] { nalgebra::Rotation3::from_matrix_unchecked(p.rotation).scaled_axis().into() };
+        let (now, next) = (self.pose(wall)?, &self.next[wall]);
+        Some(Placement { pivot: now.pivot, offset: [now.offset, next.offset], turn: [turn(now), turn(next)] })
     }
 
     fn unposable(&self, wall: usize) -> Option<String> {

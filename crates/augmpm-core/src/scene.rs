@@ -366,7 +366,7 @@ pub struct RigidBodySpec {
     pub hinge: Option<[Real; 2]>,
 }
 
-fn default_contact_friction() -> Real {
+pub(crate) fn default_contact_friction() -> Real {
     0.5
 }
 

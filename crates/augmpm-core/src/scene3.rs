@@ -1,16 +1,18 @@
 //! The scene of a 3D simulation: the keys of a 2D scene ([`crate::scene::Scene`]) with three-component
 //! vectors (`grid.domain`, `gravity`, positions, velocities), 3D walls (boxes, planes, spheres,
-//! cylinders; [`crate::geometry3`]) and 3D bodies (boxes, spheres, cylinders), and how a
-//! `Simulation<3>` is built from it.
+//! cylinders; [`crate::geometry3`]), 3D bodies (boxes, spheres, cylinders) and rigid bodies (boxes,
+//! spheres, cylinders, meshes), and how a `Simulation<3>` is built from it.
 
+use crate::contact::{Contact, Contacts, Contacts3};
 use crate::geometry::{Region, Side};
 use crate::geometry3::{Solid, Wall3, Walls3};
 use crate::grid::GridLayout;
 use crate::material::{ConstitutiveModel, Material};
 use crate::math::{wide, Matrix, Precision, Real, Vector};
 use crate::mesh::TriangleMesh;
-use crate::motion::Motion3;
+use crate::motion::{Motion3, WallPose};
 use crate::particles::Particles;
+use crate::rigid::RigidBody;
 use crate::scene::{
     default_side, friction, inside, one, time_step, AugmentedSpec, MemoryEstimate, SceneError, Seeding, SideSpec,
     TimeSpec, MAX_GRID_NODES, MAX_SEED_CANDIDATES,
@@ -407,6 +409,157 @@ pub struct Body3Spec {
     pub fill: bool,
 }
 
+/// The shape of a 3D rigid body: a solid box, ball, capped cylinder or closed mesh (the material stays
+/// outside it).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(tag = "shape", rename_all = "lowercase")]
+pub enum Rigid3Shape {
+    /// A box turned by `angle` about `axis`.
+    #[schemars(title = "BoxRigidBody3")]
+    Box {
+        /// Centre.
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
+        center: [Real; 3],
+        /// Edge lengths along the box's own axes.
+        #[schemars(extend("unit" = "m"), transform = crate::scene::items_positive)]
+        size: [Real; 3],
+        /// Axis the box is turned about (any length but zero).
+        #[serde(default = "z_axis")]
+        #[schemars(extend("unit" = "1", "unbounded" = true))]
+        axis: [Real; 3],
+        /// Angle the box is turned by about `axis`, counter-clockwise seen from its tip.
+        #[serde(default)]
+        #[schemars(extend("unit" = "rad", "unbounded" = true))]
+        angle: Real,
+    },
+    /// A ball.
+    #[schemars(title = "SphereRigidBody")]
+    Sphere {
+        /// Centre.
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
+        center: [Real; 3],
+        /// Radius.
+        #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "m"))]
+        radius: Real,
+    },
+    /// A capped cylinder.
+    #[schemars(title = "CylinderRigidBody")]
+    Cylinder {
+        /// Centre of its axis.
+        #[schemars(extend("unit" = "m", "unbounded" = true))]
+        center: [Real; 3],
+        /// Direction of its axis (any length but zero).
+        #[schemars(extend("unit" = "1", "unbounded" = true))]
+        axis: [Real; 3],
+        /// Radius.
+        #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "m"))]
+        radius: Real,
+        /// Length along the axis.
+        #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "m"))]
+        length: Real,
+    },
+    /// A closed triangle mesh.
+    #[schemars(title = "MeshRigidBody")]
+    Mesh {
+        #[serde(flatten)]
+        mesh: MeshSource,
+    },
+}
+
+/// A rigid body that the material pushes and that pushes it back (3D): a solid of uniform density whose
+/// surface is a moving wall; gravity and the impulse of its wall conditions move it. It meets the other
+/// bodies and the scene's walls in contacts (rapier).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "RigidBody3")]
+pub struct RigidBody3Spec {
+    #[serde(flatten)]
+    pub shape: Rigid3Shape,
+    /// Density; give it or `mass`.
+    #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "kg/m³"))]
+    pub density: Option<Real>,
+    /// Mass; give it or `density`.
+    #[serde(default)]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "kg"))]
+    pub mass: Option<Real>,
+    /// Initial velocity of its centre of mass.
+    #[serde(default)]
+    #[schemars(extend("unit" = "m/s", "unbounded" = true))]
+    pub velocity: [Real; 3],
+    /// Initial angular velocity: about its direction, at its length.
+    #[serde(default)]
+    #[schemars(extend("unit" = "rad/s", "unbounded" = true))]
+    pub angular_velocity: [Real; 3],
+    /// Its surface's condition (default: the scene's `wall_condition`).
+    #[serde(default)]
+    pub condition: Option<WallCondition>,
+    /// Coulomb friction coefficient μ of a `separate` surface (default: the scene's `wall_friction`).
+    #[serde(default, with = "friction::optional")]
+    #[schemars(schema_with = "friction::optional_schema")]
+    pub friction: Option<Real>,
+    /// Coulomb friction coefficient of its contacts with other bodies and the walls; a contact takes the
+    /// larger of its two sides' (a wall's is 0).
+    #[serde(default = "crate::scene::default_contact_friction")]
+    #[schemars(extend("minimum" = 0.0, "unit" = "1"))]
+    pub contact_friction: Real,
+    /// Restitution of its contacts with other bodies and the walls: 0 stops them, 1 bounces elastically;
+    /// a contact takes the larger of its two sides'.
+    #[serde(default)]
+    #[schemars(extend("minimum" = 0.0, "maximum" = 1.0, "unit" = "1"))]
+    pub restitution: Real,
+}
+
+impl RigidBody3Spec {
+    /// Its solid as drawn, its mass (kg), inertia about its centre of mass in the frame the scene draws it
+    /// in (kg·m²) and its centre of mass (m); an error names `key` for a bad direction or mesh, or
+    /// neither or both of `density` and `mass`.
+    fn solid(&self, key: &str) -> Result<(Solid, Real, Matrix<3>, P3), SceneError> {
+        let pi = crate::math::PI;
+        let outer = |a: &P3| a * a.transpose();
+        // The solid, its volume (m³), the inertia of unit density about its centre (m⁵) and that centre.
+        let (solid, volume, inertia, centre) = match &self.shape {
+            Rigid3Shape::Box { center, size, axis, angle } => {
+                let axis = nalgebra::Unit::new_normalize(direction(&format!("{key}.axis"), axis)?);
+                let axes: Matrix<3> = nalgebra::Rotation3::from_axis_angle(&axis, *angle).into_inner();
+                let half = p3(size) * 0.5;
+                let volume = 8.0 * half.x * half.y * half.z;
+                let (x, y, z) = (half.x * half.x, half.y * half.y, half.z * half.z);
+                let own = Matrix::<3>::from_diagonal(&P3::new(y + z, x + z, x + y)) * (volume / 3.0);
+                (Solid::Box { centre: p3(center), half, axes }, volume, axes * own * axes.transpose(), p3(center))
+            }
+            Rigid3Shape::Sphere { center, radius } => {
+                let volume = 4.0 / 3.0 * pi * radius.powi(3);
+                let inertia = Matrix::<3>::identity() * (0.4 * volume * radius * radius);
+                (Solid::Sphere { centre: p3(center), radius: *radius }, volume, inertia, p3(center))
+            }
+            Rigid3Shape::Cylinder { center, axis, radius, length } => {
+                let a = direction(&format!("{key}.axis"), axis)?;
+                let volume = pi * radius * radius * length;
+                let (along, across) = (0.5 * radius * radius, (3.0 * radius * radius + length * length) / 12.0);
+                let inertia = (outer(&a) * along + (Matrix::<3>::identity() - outer(&a)) * across) * volume;
+                let solid = Solid::Cylinder { centre: p3(center), axis: a, radius: *radius, half_length: 0.5 * length };
+                (solid, volume, inertia, p3(center))
+            }
+            Rigid3Shape::Mesh { mesh } => {
+                direction(&format!("{key}.axis"), &mesh.axis)?;
+                let built = mesh.build(key)?;
+                let (vertices, triangles) = built.triangles();
+                let points: Vec<_> = vertices.iter().map(|v| nalgebra::Point3::from(*v)).collect();
+                let props = parry3d_f64::mass_properties::MassProperties::from_trimesh(1.0, &points, triangles);
+                let centre = props.local_com.coords.map(|c| c as Real);
+                let inertia = props.reconstruct_inertia_matrix().map(|c| c as Real);
+                (Solid::Mesh(built), props.mass() as Real, inertia, centre)
+            }
+        };
+        let density = match (self.density, self.mass) {
+            (Some(rho), None) => rho,
+            (None, Some(m)) => m / volume,
+            _ => return Err(SceneError::new(key, "give exactly one of density and mass")),
+        };
+        Ok((solid, density * volume, inertia * density, centre))
+    }
+}
+
 /// A 3D scene: the grid, time stepping, walls and bodies, and how walls act on the grid.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -443,6 +596,10 @@ pub struct Scene3 {
     /// The bodies of material: a run needs at least one.
     #[serde(default)]
     pub bodies: Vec<Body3Spec>,
+    /// Rigid bodies the material pushes and that push it back; their walls follow the scene's walls
+    /// (wall `len(walls) + k` is `rigid_bodies[k]`).
+    #[serde(default)]
+    pub rigid_bodies: Vec<RigidBody3Spec>,
     /// Settings of the augmented grid (`method = "augmented"`).
     #[serde(default)]
     pub augmented: AugmentedSpec,
@@ -535,6 +692,18 @@ impl Scene3 {
                 return Err(SceneError::new(
                     format!("{key}.friction"),
                     format!("friction acts on separate walls; this wall is {condition:?}").to_lowercase(),
+                ));
+            }
+            separate |= condition == WallCondition::Separate;
+        }
+        for (k, body) in self.rigid_bodies.iter().enumerate() {
+            let key = format!("rigid_bodies[{k}]");
+            body.solid(&key)?;
+            let condition = body.condition.unwrap_or(self.wall_condition);
+            if body.friction.is_some_and(|mu| mu > 0.0) && condition != WallCondition::Separate {
+                return Err(SceneError::new(
+                    format!("{key}.friction"),
+                    format!("friction acts on separate surfaces; this body's is {condition:?}").to_lowercase(),
                 ));
             }
             separate |= condition == WallCondition::Separate;
@@ -644,8 +813,21 @@ impl Scene3 {
             let contact = self.contact(condition.unwrap_or(self.wall_condition), friction);
             contacts.push(WallContact { moving: w.motion().is_some(), ..contact });
         }
+        let mut moves: Vec<Option<Motion3>> = self.walls.iter().map(|w| w.motion().cloned()).collect();
+        // The rigid bodies: solids moving at their initial velocities about their centres of mass until
+        // the engine poses them.
+        for (k, body) in self.rigid_bodies.iter().enumerate() {
+            let (solid, _, _, centre) = body.solid(&format!("rigid_bodies[{k}]"))?;
+            walls.push(Wall3 { solid, side: Side::Outside });
+            let contact = self.contact(body.condition.unwrap_or(self.wall_condition), body.friction);
+            contacts.push(WallContact { moving: true, ..contact });
+            moves.push(Some(Motion3::Constant {
+                velocity: body.velocity,
+                angular_velocity: body.angular_velocity,
+                pivot: Some(centre.into()),
+            }));
+        }
         contacts.push(self.contact(self.wall_condition, None));
-        let moves = self.walls.iter().map(|w| w.motion().cloned()).collect();
         let region = Walls3::new(walls, extent)
             .with_moves(moves)
             .map_err(|i| SceneError::new(format!("walls[{i}].motion"), "a plane cannot move; give a box instead"))?;
@@ -789,6 +971,14 @@ impl Scene3 {
             }
         }
         let materials: Vec<Material> = self.bodies.iter().map(|b| b.material.clone()).collect();
+        let (mut bodies, mut contacts) = (Vec::new(), Vec::new());
+        for (k, spec) in self.rigid_bodies.iter().enumerate() {
+            let (_, mass, inertia, centre) = spec.solid(&format!("rigid_bodies[{k}]"))?;
+            bodies.push(RigidBody { wall: self.walls.len() + k, mass, inertia, centre });
+            contacts.push(Contact { friction: spec.contact_friction, restitution: spec.restitution, hinge: None });
+        }
+        let contacts: Option<Box<dyn Contacts<3>>> =
+            (!bodies.is_empty()).then(|| Box::new(Contacts3::new(&region, &bodies, contacts, h)) as _);
         let mut model = Model {
             layout,
             materials,
@@ -797,12 +987,32 @@ impl Scene3 {
             boundary,
             wall_fraction: None,
             dt: 0.0,
-            bodies: Vec::new(),
-            contacts: None,
+            bodies,
+            contacts,
         };
-        let (dt, warning) = time_step(&self.time, model.stable_dt(), fastest, h)?;
+        let (dt, warning) = time_step(&self.time, model.stable_dt(), fastest, h).map_err(|e| {
+            // A rigid body's wall follows the scene's: name the body.
+            match fastest.filter(|&(wall, _)| wall >= self.walls.len() && e.key == format!("walls[{wall}].motion")) {
+                Some((wall, _)) => {
+                    SceneError::new(format!("rigid_bodies[{}].velocity", wall - self.walls.len()), e.reason)
+                }
+                None => e,
+            }
+        })?;
         model.dt = dt;
-        Ok((Simulation::new(model, particles), warning.into_iter().collect()))
+        let mut sim = Simulation::new(model, particles);
+        // Each rigid body's wall is posed by the engine from the start, at its initial velocities.
+        for (body, spec) in sim.model.bodies.iter().zip(&self.rigid_bodies) {
+            let pose = WallPose {
+                time: 0.0,
+                position: [0.0; 3],
+                angle: [0.0; 3],
+                velocity: spec.velocity,
+                angular_velocity: spec.angular_velocity,
+            };
+            sim.state.wall_poses.push((body.wall, pose));
+        }
+        Ok((sim, warning.into_iter().collect()))
     }
 }
 
