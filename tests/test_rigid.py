@@ -4,6 +4,7 @@ engine poses from gravity and the impulse its wall conditions give the material.
 from __future__ import annotations
 
 import math
+import re
 import shutil
 
 import numpy as np
@@ -306,3 +307,29 @@ def test_a_dam_break_swings_a_hinged_flap_open():
     assert inside == 0
     assert widest > 0.3
     assert strayed < 1e-6
+
+
+@pytest.mark.parametrize(
+    ("body", "key"),
+    [
+        ({"shape": "sphere", "center": [0.5, 0.6, 0.5], "radius": 0.05}, "rigid_bodies[0]"),
+        ({"shape": "sphere", "center": [0.5, 0.6, 0.5], "radius": 0.05, "mass": 1.0, "hinge": [0.5, 0.7, 0.5]},
+         "rigid_bodies[0].hinge_axis"),
+        ({"shape": "sphere", "center": [0.5, 0.6, 0.5], "radius": 0.05, "mass": 1.0, "hinge_axis": [0, 0, 1]},
+         "rigid_bodies[0].hinge"),
+        ({"shape": "sphere", "center": [0.5, 0.6, 0.5], "radius": 0.05, "mass": 1.0, "hinge": [0.5, 0.7, 0.5],
+          "hinge_axis": [0, 0, 1], "velocity": [0.1, 0, 0]}, "rigid_bodies[0].velocity"),
+        ({"shape": "sphere", "center": [0.5, 0.6, 0.5], "radius": 0.05, "mass": 1.0, "hinge": [0.5, 0.7, 0.5],
+          "hinge_axis": [0, 0, 1], "angular_velocity": [1.0, 0, 0]}, "rigid_bodies[0].angular_velocity"),
+        ({"shape": "cylinder", "center": [0.5, 0.6, 0.5], "axis": [0, 0, 0], "radius": 0.05, "length": 0.1,
+          "mass": 1.0}, "rigid_bodies[0].axis"),
+        ({"shape": "box", "center": [0.5, 0.6, 0.5], "size": [0.1, 0.1, 0.1], "mass": 1.0, "friction": 0.3},
+         "rigid_bodies[0].friction"),
+    ],
+)  # fmt: skip
+def test_bad_3d_rigid_bodies_are_refused_naming_the_key(body, key):
+    """A 3D rigid body without exactly one of density and mass, a hinge without its axis (or the
+    reverse), a hinged body given a velocity or a spin off the hinge's axis, an axis of no length, or
+    friction on a surface that is not separate: refused, naming the key."""
+    with pytest.raises(augmpm.SceneError, match=re.escape(key)):
+        augmpm.Simulation(_tank3([body]))

@@ -58,13 +58,16 @@ pub trait Contacts<const D: usize>: Send + Sync {
     ) -> Vec<WallPose<D>>;
 }
 
-/// How a rigid body meets others: friction and restitution of its contacts, and the point, fixed in the
-/// scene, that it turns about if it is hinged (m).
+/// A hinge: the point fixed in the scene that a body turns about (m; z unused in 2D) and the unit axis
+/// it turns about there (z in 2D).
+pub type Hinge = ([Real; 3], [Real; 3]);
+
+/// How a rigid body meets others: friction and restitution of its contacts, and its hinge if it has one.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Contact {
     pub friction: Real,
     pub restitution: Real,
-    pub hinge: Option<Point>,
+    pub hinge: Option<Hinge>,
 }
 
 /// The contacts of a 2D scene's rigid bodies, through rapier.
@@ -146,7 +149,8 @@ impl Contacts<2> for Contacts2 {
                     .can_sleep(false);
                 let handle = set.insert(builder);
                 colliders.insert_with_parent(collider(shape, contact.friction, contact.restitution), handle, &mut set);
-                if let Some(hinge) = contact.hinge {
+                if let Some((at, _)) = contact.hinge {
+                    let hinge = Point::new(at[0], at[1]);
                     let joint = rp::RevoluteJointBuilder::new()
                         .local_anchor1(Point2::from(vector(&hinge)))
                         .local_anchor2(Point2::from(vector(&(hinge - body.centre))));
@@ -269,7 +273,7 @@ pub struct Contacts3 {
 
 impl Contacts3 {
     /// The contacts of `bodies` (whose walls are the last of `region`'s) in `region`, on a grid of
-    /// spacing `h` (m). Hinges are 2D only.
+    /// spacing `h` (m).
     pub fn new(region: &Walls3, bodies: &[RigidBody<3>], contacts: Vec<Contact>, h: Real) -> Self {
         let first_body = bodies.iter().map(|b| b.wall).min().unwrap_or(region.walls.len());
         let walls = (0..first_body)
@@ -344,6 +348,7 @@ impl Contacts<3> for Contacts3 {
                 );
             }
         }
+        let mut joints = rp3::ImpulseJointSet::new();
         let handles: Vec<_> = bodies
             .iter()
             .zip(kicked)
@@ -364,6 +369,14 @@ impl Contacts<3> for Contacts3 {
                     handle,
                     &mut set,
                 );
+                if let Some((point, axis)) = contact.hinge {
+                    // The body's frame is its drawing's, so the axis and the anchor keep their drawn values.
+                    let (point, axis) = (Vector3::from(point).map(|c| c as f64), Vector3::from(axis).map(|c| c as f64));
+                    let joint = rp3::RevoluteJointBuilder::new(nalgebra::Unit::new_normalize(axis))
+                        .local_anchor1(Point3::from(point))
+                        .local_anchor2(Point3::from(point - wide3(&body.centre)));
+                    joints.insert(ground, handle, joint, true);
+                }
                 handle
             })
             .collect();
@@ -376,7 +389,7 @@ impl Contacts<3> for Contacts3 {
             &mut rp3::NarrowPhase::new(),
             &mut set,
             &mut colliders,
-            &mut rp3::ImpulseJointSet::new(),
+            &mut joints,
             &mut rp3::MultibodyJointSet::new(),
             &mut rp3::CCDSolver::new(),
             &(),

@@ -1085,7 +1085,7 @@ impl Scene {
             let mut inertia = crate::math::Matrix::<3>::zeros();
             inertia[(2, 2)] = polar;
             bodies.push(RigidBody { wall: self.walls.len() + k, mass, inertia, centre });
-            let hinge = spec.hinge.as_ref().map(point);
+            let hinge = spec.hinge.map(|[x, y]| ([x, y, 0.0], [0.0, 0.0, 1.0]));
             contacts.push(Contact { friction: spec.contact_friction, restitution: spec.restitution, hinge });
         }
         let contacts: Option<Box<dyn Contacts<2>>> =

@@ -3,7 +3,7 @@
 //! cylinders; [`crate::geometry3`]), 3D bodies (boxes, spheres, cylinders) and rigid bodies (boxes,
 //! spheres, cylinders, meshes), and how a `Simulation<3>` is built from it.
 
-use crate::contact::{Contact, Contacts, Contacts3};
+use crate::contact::{Contact, Contacts, Contacts3, Hinge};
 use crate::geometry::{Region, Side};
 use crate::geometry3::{Solid, Wall3, Walls3};
 use crate::grid::GridLayout;
@@ -507,9 +507,55 @@ pub struct RigidBody3Spec {
     #[serde(default)]
     #[schemars(extend("minimum" = 0.0, "maximum" = 1.0, "unit" = "1"))]
     pub restitution: Real,
+    /// A point fixed in the scene that the body turns about, with `hinge_axis`: an axle, a hinge. Its
+    /// centre then moves as its `angular_velocity` (along the axis) turns it about the hinge (leave
+    /// `velocity` out).
+    #[serde(default)]
+    #[schemars(extend("unit" = "m", "unbounded" = true))]
+    pub hinge: Option<[Real; 3]>,
+    /// The direction of the hinge's axis (any length but zero); give it with `hinge`.
+    #[serde(default)]
+    #[schemars(extend("unit" = "1", "unbounded" = true))]
+    pub hinge_axis: Option<[Real; 3]>,
 }
 
 impl RigidBody3Spec {
+    /// The initial velocity (m/s) of its centre of mass at `centre` (m): `velocity`, or about its hinge.
+    fn initial_velocity(&self, centre: &P3) -> [Real; 3] {
+        match self.hinge {
+            Some(hinge) => p3(&self.angular_velocity).cross(&(centre - p3(&hinge))).into(),
+            None => self.velocity,
+        }
+    }
+
+    /// Its hinge and the hinge's unit axis, if it has one; an error names the key that is missing, bad
+    /// or at odds with the hinge.
+    fn hinge(&self, key: &str) -> Result<Option<Hinge>, SceneError> {
+        match (self.hinge, self.hinge_axis) {
+            (None, None) => Ok(None),
+            (Some(_), None) => Err(SceneError::new(format!("{key}.hinge_axis"), "a hinge needs its axis")),
+            (None, Some(_)) => Err(SceneError::new(format!("{key}.hinge"), "hinge_axis is given without a hinge")),
+            (Some(point), Some(axis)) => {
+                let axis = direction(&format!("{key}.hinge_axis"), &axis)?;
+                if self.velocity != [0.0; 3] {
+                    return Err(SceneError::new(
+                        format!("{key}.velocity"),
+                        "a hinged body's centre moves as its angular_velocity turns it about the hinge; leave \
+                         velocity out",
+                    ));
+                }
+                let w = p3(&self.angular_velocity);
+                if (w - axis * w.dot(&axis)).norm() > 1e-9 * w.norm().max(1.0) {
+                    return Err(SceneError::new(
+                        format!("{key}.angular_velocity"),
+                        "a hinged body turns about the hinge's axis only",
+                    ));
+                }
+                Ok(Some((point, axis.into())))
+            }
+        }
+    }
+
     /// Its solid as drawn, its mass (kg), inertia about its centre of mass in the frame the scene draws it
     /// in (kg·m²) and its centre of mass (m); an error names `key` for a bad direction or mesh, or
     /// neither or both of `density` and `mass`.
@@ -699,6 +745,7 @@ impl Scene3 {
         for (k, body) in self.rigid_bodies.iter().enumerate() {
             let key = format!("rigid_bodies[{k}]");
             body.solid(&key)?;
+            body.hinge(&key)?;
             let condition = body.condition.unwrap_or(self.wall_condition);
             if body.friction.is_some_and(|mu| mu > 0.0) && condition != WallCondition::Separate {
                 return Err(SceneError::new(
@@ -822,7 +869,7 @@ impl Scene3 {
             let contact = self.contact(body.condition.unwrap_or(self.wall_condition), body.friction);
             contacts.push(WallContact { moving: true, ..contact });
             moves.push(Some(Motion3::Constant {
-                velocity: body.velocity,
+                velocity: body.initial_velocity(&centre),
                 angular_velocity: body.angular_velocity,
                 pivot: Some(centre.into()),
             }));
@@ -975,7 +1022,8 @@ impl Scene3 {
         for (k, spec) in self.rigid_bodies.iter().enumerate() {
             let (_, mass, inertia, centre) = spec.solid(&format!("rigid_bodies[{k}]"))?;
             bodies.push(RigidBody { wall: self.walls.len() + k, mass, inertia, centre });
-            contacts.push(Contact { friction: spec.contact_friction, restitution: spec.restitution, hinge: None });
+            let hinge = spec.hinge(&format!("rigid_bodies[{k}]"))?;
+            contacts.push(Contact { friction: spec.contact_friction, restitution: spec.restitution, hinge });
         }
         let contacts: Option<Box<dyn Contacts<3>>> =
             (!bodies.is_empty()).then(|| Box::new(Contacts3::new(&region, &bodies, contacts, h)) as _);
@@ -1007,7 +1055,7 @@ impl Scene3 {
                 time: 0.0,
                 position: [0.0; 3],
                 angle: [0.0; 3],
-                velocity: spec.velocity,
+                velocity: spec.initial_velocity(&body.centre),
                 angular_velocity: spec.angular_velocity,
             };
             sim.state.wall_poses.push((body.wall, pose));
