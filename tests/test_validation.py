@@ -226,5 +226,5 @@ def test_rigid_bodies_exchange_momentum_and_stay_clear(quick_report):
     for case in ("rigid_buoyancy_box", "rigid_buoyancy_disk", "rigid_impact_ball_into_snow", "rigid_impact_piston_box"):
         assert _value(records, case, "augmented", "particles_inside_max", 0.0) == 0
     for case in ("rigid_impact_ball_into_snow", "rigid_impact_piston_box"):
-        assert _value(records, case, "augmented", "energy_rise_undriven_over_energy_lost", 0.0) == 0
+        assert _value(records, case, "augmented", "energy_rise_undriven_over_energy_lost", 0.0) <= 1e-9
     assert _value(records, "rigid_impact_piston_box", "naive", "particles_inside_max", 0.0) > 0

@@ -341,6 +341,8 @@ def _held_walls(scene: Scene, sim: Simulation, motion: bool) -> Scene:
     motion that stands still when ``motion``, else a still wall)."""
     import numpy as np
 
+    from augmpm.validation.rigid import placed
+
     data = scene.model_dump(mode="json", exclude_none=True)
     walls = data["walls"]
     for spec, (x, y, angle, *_) in zip(scene.rigid_bodies, sim.rigid_bodies, strict=True):
@@ -348,12 +350,8 @@ def _held_walls(scene: Scene, sim: Simulation, motion: bool) -> Scene:
         if body["shape"] == "circle":
             wall = {"type": "circle", "center": [x, y], "radius": body["radius"], "side": "outside"}
         else:
-            v = np.array(body["vertices"])
-            cross = v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1]
-            centroid = ((v + np.roll(v, -1, axis=0)) * cross[:, None]).sum(axis=0) / (3 * cross.sum())
-            c, s = math.cos(angle), math.sin(angle)
-            placed = (v - centroid) @ np.array([[c, s], [-s, c]]) + [x, y]
-            wall = {"type": "polygon", "vertices": placed.tolist(), "side": "outside"}
+            outline = placed(np.array(body["vertices"]), x, y, angle)
+            wall = {"type": "polygon", "vertices": outline.tolist(), "side": "outside"}
         if motion:
             wall["motion"] = {"type": "constant", "velocity": [0.0, 0.0]}
         walls.append(wall)

@@ -469,9 +469,9 @@ def _read_mesh(path: str, stamp: tuple[int, int], key: str) -> tuple[list[list[f
 
 
 def _mesh_entries(data: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
-    """The walls and bodies of a scene dict that are meshes, with their keys (``walls[2]``)."""
+    """The walls, bodies and rigid bodies of a scene dict that are meshes, with their keys (``walls[2]``)."""
     entries: list[tuple[str, dict[str, Any]]] = []
-    for table, tag in (("walls", "type"), ("bodies", "shape")):
+    for table, tag in (("walls", "type"), ("bodies", "shape"), ("rigid_bodies", "shape")):
         listed = data.get(table) if isinstance(data, dict) else None
         for i, entry in enumerate(listed if isinstance(listed, list) else []):
             if isinstance(entry, dict) and entry.get(tag) == "mesh":

@@ -184,9 +184,11 @@ impl Contacts<2> for Contacts2 {
                 // The turn over the step, added to the angle so that it is not wrapped to (−π, π].
                 let turned = (rapier2d_f64::na::UnitComplex::new(start as f64).inverse() * moved.rotation()).angle();
                 let (x, v) = (moved.translation(), moved.linvel());
+                // The offset from the drawing in f64 first, so that f32 keeps a slow body's small steps.
+                let offset = x - vector(&body.centre);
                 WallPose::planar(
                     t + dt,
-                    [x.x as Real - body.centre.x, x.y as Real - body.centre.y],
+                    [offset.x as Real, offset.y as Real],
                     start + turned as Real,
                     [v.x as Real, v.y as Real],
                     moved.angvel() as Real,
@@ -194,6 +196,32 @@ impl Contacts<2> for Contacts2 {
             })
             .collect()
     }
+}
+
+/// The triangles (vertex indices) of a simple counter-clockwise polygon, by ear clipping: corner after
+/// corner, cut off one that turns left and whose triangle holds no other vertex. A polygon that rounding
+/// leaves without such a corner keeps the triangles found so far.
+fn ear_clip(points: &[Point2<f64>]) -> Vec<[u32; 3]> {
+    let cross = |a: &Point2<f64>, b: &Point2<f64>, c: &Point2<f64>| (b - a).perp(&(c - a));
+    let mut left: Vec<usize> = (0..points.len()).collect();
+    let mut triangles = Vec::with_capacity(points.len().saturating_sub(2));
+    while left.len() >= 3 {
+        let n = left.len();
+        let corner = |k: usize| [left[(k + n - 1) % n], left[k], left[(k + 1) % n]];
+        let ear = (0..n).find(|&k| {
+            let [i, j, l] = corner(k);
+            let (a, b, c) = (&points[i], &points[j], &points[l]);
+            cross(a, b, c) > 0.0
+                && left.iter().filter(|&&m| m != i && m != j && m != l).all(|&m| {
+                    let p = &points[m];
+                    cross(a, b, p) < 0.0 || cross(b, c, p) < 0.0 || cross(c, a, p) < 0.0
+                })
+        });
+        let Some(k) = ear else { break };
+        triangles.push(corner(k).map(|i| i as u32));
+        left.remove(k);
+    }
+    triangles
 }
 
 fn vector(p: &Point) -> Vector2<f64> {
@@ -224,8 +252,17 @@ fn surface(shape: &WallShape, origin: &Point, h: Real) -> rp::SharedShape {
             });
             let solid = if convex { rp::SharedShape::convex_polyline(points.clone()) } else { None };
             solid.unwrap_or_else(|| {
-                let segments: Vec<[u32; 2]> = (0..n as u32).map(|i| [i, (i + 1) % n as u32]).collect();
-                rp::SharedShape::convex_decomposition(&points, &segments)
+                // Concave: the convex pieces of its triangulation (Hertel–Mehlhorn), which cover it exactly.
+                let parts: Vec<_> = rapier2d_f64::parry::transformation::hertel_mehlhorn(&points, &ear_clip(&points))
+                    .into_iter()
+                    .filter_map(rp::SharedShape::convex_polyline)
+                    .map(|part| (Isometry2::identity(), part))
+                    .collect();
+                if parts.is_empty() {
+                    closed(points)
+                } else {
+                    rp::SharedShape::compound(parts)
+                }
             })
         }
         WallShape::Circle(c, Side::Outside) => {
@@ -262,11 +299,12 @@ fn surface(shape: &WallShape, origin: &Point, h: Real) -> rp::SharedShape {
 pub struct Contacts3 {
     /// The scene's walls: each one's index among the region's walls, its surface placed relative to its
     /// pivot (the shape and where it sits in the pivot's frame), and the pivot (m, where the scene draws it).
-    walls: Vec<(usize, rp3::SharedShape, Isometry3<f64>, Vector3<f64>)>,
+    walls: Vec<(usize, Surface3, Vector3<f64>)>,
     /// The domain box's far corner (m).
     extent: Vector3<f64>,
-    /// Each body's surface placed relative to its centre of mass as drawn, and how it meets others.
-    bodies: Vec<(rp3::SharedShape, Isometry3<f64>, Contact)>,
+    /// Each body's surface placed relative to its centre of mass as drawn, its mass properties in the frame
+    /// it is drawn in, and how it meets others.
+    bodies: Vec<(Surface3, rp3::MassProperties, Contact)>,
     /// The grid spacing (m): rapier's length unit.
     h: f64,
 }
@@ -279,16 +317,16 @@ impl Contacts3 {
         let walls = (0..first_body)
             .map(|w| {
                 let pivot = region.pivot(w);
-                let (shape, at) = surface3(&region.walls[w], &pivot, h);
-                (w, shape, at, pivot.map(|c| c as f64))
+                (w, surface3(&region.walls[w], &pivot, h, false), pivot.map(|c| c as f64))
             })
             .collect();
         let bodies = bodies
             .iter()
             .zip(contacts)
             .map(|(b, c)| {
-                let (shape, at) = surface3(&region.walls[b.wall], &b.centre, h);
-                (shape, at, c)
+                let inertia = b.inertia.map(|c| c as f64);
+                let mass = rp3::MassProperties::with_inertia_matrix(Point3::origin(), b.mass as f64, inertia);
+                (surface3(&region.walls[b.wall], &b.centre, h, true), mass, c)
             })
             .collect();
         Self { walls, extent: region.extent().map(|c| c as f64), bodies, h: h as f64 }
@@ -307,9 +345,10 @@ impl Contacts<3> for Contacts3 {
         let mut set = rp3::RigidBodySet::new();
         let mut colliders = rp3::ColliderSet::new();
         // A wall's friction and restitution are 0, so that each contact takes its body's.
-        let collider = |shape: &rp3::SharedShape, at: &Isometry3<f64>, friction: Real, restitution: Real| {
-            rp3::ColliderBuilder::new(shape.clone())
-                .position(*at)
+        let collider = |surface: &Surface3, friction: Real, restitution: Real| {
+            rp3::ColliderBuilder::new(surface.shape.clone())
+                .position(surface.at)
+                .contact_skin(surface.skin)
                 .density(0.0)
                 .friction(friction as f64)
                 .restitution(restitution as f64)
@@ -317,7 +356,7 @@ impl Contacts<3> for Contacts3 {
                 .restitution_combine_rule(rp3::CoefficientCombineRule::Max)
         };
         let turned = |turn: &[Real; 3]| UnitQuaternion::from_scaled_axis(Vector3::from(*turn).map(|c| c as f64));
-        for (wall, shape, at, pivot) in &self.walls {
+        for (wall, surface, pivot) in &self.walls {
             let handle = match region.placement(*wall) {
                 Some(p) => {
                     let place = |k: usize| {
@@ -330,7 +369,7 @@ impl Contacts<3> for Contacts3 {
                 }
                 None => set.insert(rp3::RigidBodyBuilder::fixed().translation(*pivot)),
             };
-            colliders.insert_with_parent(collider(shape, at, 0.0, 0.0), handle, &mut set);
+            colliders.insert_with_parent(collider(surface, 0.0, 0.0), handle, &mut set);
         }
         // The domain box: the half-spaces past its six faces.
         let ground = set.insert(rp3::RigidBodyBuilder::fixed());
@@ -340,12 +379,12 @@ impl Contacts<3> for Contacts3 {
                 normal[k] = -outward;
                 let mut x = Vector3::zeros();
                 x[k] = corner;
-                let face = rp3::SharedShape::halfspace(nalgebra::Unit::new_normalize(normal));
-                colliders.insert_with_parent(
-                    collider(&face, &Isometry3::translation(x.x, x.y, x.z), 0.0, 0.0),
-                    ground,
-                    &mut set,
-                );
+                let face = Surface3 {
+                    shape: rp3::SharedShape::halfspace(nalgebra::Unit::new_normalize(normal)),
+                    at: Isometry3::translation(x.x, x.y, x.z),
+                    skin: 0.0,
+                };
+                colliders.insert_with_parent(collider(&face, 0.0, 0.0), ground, &mut set);
             }
         }
         let mut joints = rp3::ImpulseJointSet::new();
@@ -353,19 +392,17 @@ impl Contacts<3> for Contacts3 {
             .iter()
             .zip(kicked)
             .zip(&self.bodies)
-            .map(|((body, pose), (shape, at, contact))| {
+            .map(|((body, pose), (surface, mass, contact))| {
                 let centre = (body.centre + pose.offset(t)).map(|c| c as f64);
-                let inertia = body.inertia.map(|c| c as f64);
-                let mass = rp3::MassProperties::with_inertia_matrix(Point3::origin(), body.mass as f64, inertia);
                 let builder = rp3::RigidBodyBuilder::dynamic()
                     .position(Isometry3::from_parts(Translation3::from(centre), turned(&pose.turn(t))))
                     .linvel(Vector3::from(pose.velocity).map(|c| c as f64))
                     .angvel(Vector3::from(pose.angular_velocity).map(|c| c as f64))
-                    .additional_mass_properties(mass)
+                    .additional_mass_properties(*mass)
                     .can_sleep(false);
                 let handle = set.insert(builder);
                 colliders.insert_with_parent(
-                    collider(shape, at, contact.friction, contact.restitution),
+                    collider(surface, contact.friction, contact.restitution),
                     handle,
                     &mut set,
                 );
@@ -404,7 +441,8 @@ impl Contacts<3> for Contacts3 {
                 let turn = moved.rotation().scaled_axis();
                 WallPose {
                     time: t + dt,
-                    position: std::array::from_fn(|k| x[k] as Real - body.centre[k]),
+                    // The offset from the drawing in f64 first, so that f32 keeps a slow body's small steps.
+                    position: std::array::from_fn(|k| (x[k] - body.centre[k] as f64) as Real),
                     angle: std::array::from_fn(|k| turn[k] as Real),
                     velocity: std::array::from_fn(|k| v[k] as Real),
                     angular_velocity: std::array::from_fn(|k| w[k] as Real),
@@ -424,9 +462,32 @@ fn rotation(axes: &Matrix<3>) -> UnitQuaternion<f64> {
     UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(axes.map(|c| c as f64)))
 }
 
+/// A 3D contact surface: a shape, where it sits in its body's frame, and the skin (m) its contacts keep
+/// around it (a thin wall's half thickness).
+struct Surface3 {
+    shape: rp3::SharedShape,
+    at: Isometry3<f64>,
+    skin: f64,
+}
+
 /// The contact surface of a 3D wall or body drawn as `wall`, placed relative to `origin` (m); the surfaces
 /// of containers as triangles, spheres and cylinders with at least one triangle per cell `h` (m) around.
-fn surface3(wall: &Wall3, origin: &Vector<3>, h: Real) -> (rp3::SharedShape, Isometry3<f64>) {
+/// A mesh that moves freely (a rigid body, `dynamic`) is the convex pieces of its approximate convex
+/// decomposition (parry's V-HACD): rapier's contacts between two triangle meshes are not reliable.
+fn surface3(wall: &Wall3, origin: &Vector<3>, h: Real, dynamic: bool) -> Surface3 {
+    if let (true, Solid::Mesh(m)) = (dynamic, &wall.solid) {
+        let (vertices, triangles) = m.triangles();
+        let shift = -wide3(origin);
+        let points: Vec<_> = vertices.iter().map(|v| Point3::from(v + shift)).collect();
+        let shape = rp3::SharedShape::convex_decomposition(&points, triangles);
+        return Surface3 { shape, at: Isometry3::identity(), skin: 0.0 };
+    }
+    let (shape, at) = solid_surface(wall, origin, h);
+    let skin = if let Solid::Shell { half, .. } = &wall.solid { *half as f64 } else { 0.0 };
+    Surface3 { shape, at, skin }
+}
+
+fn solid_surface(wall: &Wall3, origin: &Vector<3>, h: Real) -> (rp3::SharedShape, Isometry3<f64>) {
     let at = |centre: &Vector<3>, r: UnitQuaternion<f64>| {
         Isometry3::from_parts(Translation3::from(wide3(&(centre - origin))), r)
     };
@@ -471,10 +532,56 @@ fn surface3(wall: &Wall3, origin: &Vector<3>, h: Real) -> (rp3::SharedShape, Iso
             }
         }
         Solid::Mesh(m) | Solid::Shell { mesh: m, .. } => {
+            // A thin wall's triangles are its mid-surface; its half thickness is the contact skin.
             let (vertices, triangles) = m.triangles();
             let shift = -wide3(origin);
             let points = vertices.iter().map(|v| Point3::from(v + shift)).collect();
             (rp3::SharedShape::trimesh(points, triangles.to_vec()).expect("a closed mesh"), Isometry3::identity())
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Ear clipping cuts a simple counter-clockwise polygon into n − 2 triangles, all counter-clockwise,
+    /// whose areas sum to the polygon's: an L, and the water wheel's 30 corners (six paddles on a hub,
+    /// `scenes/rigid/water_wheel.toml`), whose gaps between paddles a convex hull would fill.
+    #[test]
+    fn ear_clipping_covers_concave_polygons_exactly() {
+        let wheel: Vec<Point2<f64>> = (0..6)
+            .flat_map(|k| {
+                let a = std::f64::consts::PI / 3.0 * k as f64;
+                let (u, v) = (Vector2::new(a.cos(), a.sin()), Vector2::new(-a.sin(), a.cos()));
+                let hub = (0.06f64 * 0.06 - 0.018 * 0.018).sqrt();
+                let mid = a + std::f64::consts::PI / 6.0;
+                [
+                    u * hub - v * 0.018,
+                    u * 0.17 - v * 0.018,
+                    u * 0.17 + v * 0.018,
+                    u * hub + v * 0.018,
+                    Vector2::new(mid.cos(), mid.sin()) * 0.06,
+                ]
+            })
+            .map(Point2::from)
+            .collect();
+        let l =
+            [(0.0, 0.0), (2.0, 0.0), (2.0, 1.0), (1.0, 1.0), (1.0, 2.0), (0.0, 2.0)].map(|(x, y)| Point2::new(x, y));
+        for polygon in [l.to_vec(), wheel] {
+            let n = polygon.len();
+            let area = 0.5 * (0..n).map(|i| polygon[i].coords.perp(&polygon[(i + 1) % n].coords)).sum::<f64>();
+            let triangles = ear_clip(&polygon);
+            assert_eq!(triangles.len(), n - 2);
+            let twice: Vec<f64> = triangles
+                .iter()
+                .map(|t| {
+                    let [a, b, c] = t.map(|i| polygon[i as usize]);
+                    (b - a).perp(&(c - a))
+                })
+                .collect();
+            assert!(twice.iter().all(|&t| t > 0.0), "every triangle counter-clockwise");
+            assert!((0.5 * twice.iter().sum::<f64>() - area).abs() < 1e-12 * area);
         }
     }
 }

@@ -299,12 +299,12 @@ impl TriangleMesh {
         })
     }
 
-    /// Enclosed volume (m³).
     /// Its vertices (m) and triangles (counter-clockwise seen from outside).
     pub fn triangles(&self) -> (&[V], &[[u32; 3]]) {
         (&self.vertices, &self.triangles)
     }
 
+    /// Enclosed volume (m³).
     pub fn volume(&self) -> f64 {
         self.volume
     }

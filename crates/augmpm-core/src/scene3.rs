@@ -519,6 +519,19 @@ pub struct RigidBody3Spec {
     pub hinge_axis: Option<[Real; 3]>,
 }
 
+impl Rigid3Shape {
+    /// Area (m²) of the body's surface.
+    fn area(&self) -> Real {
+        let pi = crate::math::PI;
+        match self {
+            Rigid3Shape::Box { size, .. } => 2.0 * (size[0] * size[1] + size[1] * size[2] + size[2] * size[0]),
+            Rigid3Shape::Sphere { radius, .. } => 4.0 * pi * radius * radius,
+            Rigid3Shape::Cylinder { radius, length, .. } => 2.0 * pi * radius * (length + radius),
+            Rigid3Shape::Mesh { mesh } => mesh.area(),
+        }
+    }
+}
+
 impl RigidBody3Spec {
     /// The initial velocity (m/s) of its centre of mass at `centre` (m): `velocity`, or about its hinge.
     fn initial_velocity(&self, centre: &P3) -> [Real; 3] {
@@ -938,7 +951,9 @@ impl Scene3 {
         let spacing = self.augmented.spacing * self.cell_size();
         let d = &self.grid.domain;
         let box_area = 2.0 * (d[0] * d[1] + d[1] * d[2] + d[2] * d[0]);
-        let area: Real = box_area + self.walls.iter().map(|w| w.area(d)).sum::<Real>();
+        let area: Real = box_area
+            + self.walls.iter().map(|w| w.area(d)).sum::<Real>()
+            + self.rigid_bodies.iter().map(|b| b.shape.area()).sum::<Real>();
         area / (spacing * spacing) * 1.5
     }
 
@@ -966,8 +981,9 @@ impl Scene3 {
                     _ => 0.0,
                 };
                 if candidates.is_nan() || candidates > wide(MAX_BOUNDARY_POINTS) {
+                    let n = self.walls.len();
                     return Err(SceneError::new(
-                        format!("walls[{i}]"),
+                        if i < n { format!("walls[{i}]") } else { format!("rigid_bodies[{}]", i - n) },
                         format!("sampling this mesh at the augmented grid's spacing would try about {candidates:.3e} points (at most {MAX_BOUNDARY_POINTS:e}); split its long triangles, or raise augmented.spacing"),
                     ));
                 }

@@ -726,9 +726,11 @@ where
         }
     }
 
-    /// Moves each rigid body from the start of the step that ended at [`Simulation::time`] to its end, from
-    /// what its wall gave the material over the step ([`RigidBody::advance`]); its wall pose is replaced.
-    /// Refused, changing nothing, if a body would move more than a cell in the next step.
+    /// Moves each rigid body from the start of the step that ended at [`Simulation::time`] to its end: its
+    /// velocities take what its wall gave the material over the step and gravity ([`RigidBody::kick`]),
+    /// then the model's contacts move it ([`Contacts::drift`]; a model built without them, free flight,
+    /// [`drift`]); its wall pose is replaced. Refused, changing nothing, if a body would move more than a
+    /// cell in the next step.
     fn advance_bodies(&mut self, step: u64) -> Result<(), StepError> {
         if self.model.bodies.is_empty() {
             return Ok(());

@@ -49,7 +49,7 @@ def mass_and_inertia(body) -> tuple[float, float]:
     xn, yn = np.roll(x, -1), np.roll(y, -1)
     cross = x * yn - xn * y
     area = cross.sum() / 2
-    c = np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6 * area)
+    c = centroid(np.array(body.vertices))
     polar = (cross * (x**2 + x * xn + xn**2 + y**2 + y * yn + yn**2)).sum() / 12
     return body.density * area, body.density * (polar - area * c @ c)
 
@@ -137,17 +137,23 @@ def submerged(sim: Simulation) -> float:
         t = np.linspace(0, 2 * np.pi, 256, endpoint=False)
         outline = np.c_[x + spec.radius * np.cos(t), y + spec.radius * np.sin(t)]
     else:
-        drawn = np.array(spec.vertices)
-        (cx, cy), (c, s) = _centroid(drawn), (math.cos(angle), math.sin(angle))
-        outline = (drawn - [cx, cy]) @ np.array([[c, s], [-s, c]]) + [x, y]
+        outline = placed(np.array(spec.vertices), x, y, angle)
     return clip_below(outline, water_level(sim, x)) / clip_below(outline, 10.0)
 
 
-def _centroid(polygon: np.ndarray) -> tuple[float, float]:
+def centroid(polygon: np.ndarray) -> np.ndarray:
+    """The centroid (m) of a simple counter-clockwise polygon, (n, 2) (the shoelace sums)."""
     x, y = polygon.T
     xn, yn = np.roll(x, -1), np.roll(y, -1)
     cross = x * yn - xn * y
-    return float(((x + xn) * cross).sum() / (3 * cross.sum())), float(((y + yn) * cross).sum() / (3 * cross.sum()))
+    return np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (3 * cross.sum())
+
+
+def placed(polygon: np.ndarray, x: float, y: float, angle: float) -> np.ndarray:
+    """The polygon (a 2D rigid body as drawn) turned by ``angle`` (rad) about its centroid, which is moved
+    to (``x``, ``y``): where the body whose state is (x, y, angle) is."""
+    c, s = math.cos(angle), math.sin(angle)
+    return (polygon - centroid(polygon)) @ np.array([[c, s], [-s, c]]) + [x, y]
 
 
 def floating(body: str, method: str, resolution: int, end: float) -> tuple[float, float, int]:
@@ -228,5 +234,6 @@ def run(quick: bool) -> tuple[list[Record], dict]:
                 Record(f"rigid_impact_{n}", m, 0.0, r, metric, value, tol)
             )
             rec("particles_inside_max", max(r[1] for r in rows), 0.0)
-            rec("energy_rise_undriven_over_energy_lost", (max(undriven) - undriven[0]) / scale, 0.0)
+            # Rounding may leave the energy a hair above where it stood: 1e-9 of what the scene lost.
+            rec("energy_rise_undriven_over_energy_lost", (max(undriven) - undriven[0]) / scale, 1e-9)
     return records, {}
