@@ -16,25 +16,9 @@ from augmpm.run import BODY_COLUMNS, BODY_COLUMNS_3D, resume_run, run_scene
 from augmpm.validation import rigid
 
 G = 9.81
-WATER = {"type": "fluid", "density": 1000.0, "stiffness": 3e4, "viscosity": 5.0}
+WATER = rigid.WATER
 BOX = [[0.4, 0.40], [0.6, 0.40], [0.6, 0.5], [0.4, 0.5]]
-#: A tank whose floor is not aligned with the grid.
-TANK = [[0.1, 0.05], [0.9, 0.08], [0.9, 0.95], [0.1, 0.95]]
-
-
-def _scene(rigid: list[dict], resolution: int = 48, end: float = 2.0, **keys) -> augmpm.Scene:
-    """Water 0.3 m deep in ``TANK`` (slip walls) and the ``rigid`` bodies."""
-    scene = {
-        "gravity": [0.0, -G],
-        "grid": {"domain": [1.0, 1.0], "resolution": resolution},
-        "time": {"cfl": 0.4, "end": end, "output_interval": 100},
-        "wall_condition": "slip",
-        "walls": [{"type": "polygon", "vertices": TANK}],
-        "bodies": [{"shape": "box", "min": [0.0, 0.0], "max": [1.0, 0.35], "fill": True, "material": WATER}],
-        "rigid_bodies": rigid,
-        **keys,
-    }
-    return augmpm.Scene.from_dict(scene)
+_scene = rigid.tank
 
 
 def test_a_box_half_as_dense_as_water_floats():

@@ -156,10 +156,8 @@ def placed(polygon: np.ndarray, x: float, y: float, angle: float) -> np.ndarray:
     return (polygon - centroid(polygon)) @ np.array([[c, s], [-s, c]]) + [x, y]
 
 
-def floating(body: str, method: str, resolution: int, end: float) -> tuple[float, float, int]:
-    """``FLOATING[body]`` dropped onto water 0.3 m deep in :data:`TANK` (slip walls) and run to ``end`` (s):
-    its submerged part at the end, its largest speed (m/s) over the last 0.5 s and the most particles
-    inside it (or past any wall) at a sample (every 0.05 s)."""
+def tank(rigid: list[dict], resolution: int = 48, end: float = 2.0, **keys) -> Scene:
+    """Water 0.3 m deep in :data:`TANK` (slip walls) and the ``rigid`` bodies; ``keys`` override the scene's."""
     scene = {
         "gravity": [0.0, -G],
         "grid": {"domain": [1.0, 1.0], "resolution": resolution},
@@ -167,9 +165,17 @@ def floating(body: str, method: str, resolution: int, end: float) -> tuple[float
         "wall_condition": "slip",
         "walls": [{"type": "polygon", "vertices": TANK}],
         "bodies": [{"shape": "box", "min": [0.0, 0.0], "max": [1.0, 0.35], "fill": True, "material": WATER}],
-        "rigid_bodies": [FLOATING[body]],
+        "rigid_bodies": rigid,
+        **keys,
     }
-    sim = Simulation(Scene.from_dict(scene), method)
+    return Scene.from_dict(scene)
+
+
+def floating(body: str, method: str, resolution: int, end: float) -> tuple[float, float, int]:
+    """``FLOATING[body]`` dropped onto water 0.3 m deep in :data:`TANK` (slip walls) and run to ``end`` (s):
+    its submerged part at the end, its largest speed (m/s) over the last 0.5 s and the most particles
+    inside it (or past any wall) at a sample (every 0.05 s)."""
+    sim = Simulation(tank([FLOATING[body]], resolution, end), method)
     inside, speeds = 0, []
     while sim.time < end - 1e-9:
         sim.step(max(1, round(0.05 / sim.dt)))
