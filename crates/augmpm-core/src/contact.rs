@@ -13,17 +13,18 @@
 //! one thread, so its result does not depend on the thread count.
 //!
 //! The contact surfaces in 2D (`Contacts2`, rapier2d):
-//! - a body: its drawn solid (a disk, a convex polygon, or the convex pieces of a concave one);
+//! - a body: its drawn solid (a disk, a convex polygon, or the exact convex pieces of a concave one);
 //! - a container polygon and the domain box: closed polylines (hollow: bodies stay inside);
 //! - an obstacle polygon: a solid as a body is;
 //! - a circle: a disk, or around material a ring of segments at most a cell long;
 //! - a stroke: capsules along its centreline.
 //!
 //! In 3D (`Contacts3`, rapier3d):
-//! - a body, or an obstacle wall: its drawn solid (a box, a ball, a capped cylinder; a mesh as its
-//!   triangles);
+//! - a body: its drawn solid (a box, a ball, a capped cylinder; a mesh as the convex pieces of its
+//!   approximate V-HACD decomposition, since two triangle meshes meet unreliably);
+//! - an obstacle wall: its solid (a mesh as its triangles);
 //! - a container (a box, sphere, cylinder or mesh the material is inside) and a thin mesh wall: its
-//!   surface as triangles (hollow);
+//!   surface as triangles (hollow; a thin wall with its half thickness as contact skin);
 //! - a plane: the half-space past it; the domain box: its six faces' half-spaces.
 //!
 //! Friction and restitution are the bodies' (`contact_friction`, `restitution`). A wall's own are 0, and
