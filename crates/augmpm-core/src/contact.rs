@@ -480,7 +480,20 @@ fn surface3(wall: &Wall3, origin: &Vector<3>, h: Real, dynamic: bool) -> Surface
         let (vertices, triangles) = m.triangles();
         let shift = -wide3(origin);
         let points: Vec<_> = vertices.iter().map(|v| Point3::from(v + shift)).collect();
-        let shape = rp3::SharedShape::convex_decomposition(&points, triangles);
+        use rapier3d_f64::parry::transformation::vhacd::{VHACDParameters, VHACD};
+        let pieces = VHACD::decompose(&VHACDParameters::default(), &points, triangles, true);
+        let parts: Vec<_> = (pieces.compute_exact_convex_hulls(&points, triangles).into_iter())
+            .filter_map(|(vertices, indices)| rp3::SharedShape::convex_mesh(vertices, &indices))
+            .map(|part| (Isometry3::identity(), part))
+            .collect();
+        // No piece (a mesh too thin for V-HACD's voxels): its convex hull, or its triangles.
+        let shape = if parts.is_empty() {
+            rp3::SharedShape::convex_hull(&points).unwrap_or_else(|| {
+                rp3::SharedShape::trimesh(points.clone(), triangles.to_vec()).expect("a closed mesh")
+            })
+        } else {
+            rp3::SharedShape::compound(parts)
+        };
         return Surface3 { shape, at: Isometry3::identity(), skin: 0.0 };
     }
     let (shape, at) = solid_surface(wall, origin, h);
