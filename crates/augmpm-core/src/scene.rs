@@ -1,7 +1,7 @@
 //! Scene description (the resolved form of a scene file) and how a 2D
 //! simulation is built from it: validation, walls, particle seeding.
 
-use crate::contact::{Contact, Contacts, Contacts2};
+use crate::contact::{Contact, Contacts, Contacts2, Hinge};
 use crate::geometry::{Circle, Point, Polygon, Region, Side, Stroke, SurfaceMotion, WallShape, Walls2};
 use crate::grid::GridLayout;
 use crate::material::Material;
@@ -342,6 +342,19 @@ pub struct RigidBodySpec {
     #[serde(default)]
     #[schemars(extend("unit" = "rad/s", "unbounded" = true))]
     pub angular_velocity: Real,
+    #[serde(flatten)]
+    pub surface: RigidSurfaceSpec,
+    /// A point fixed in the scene that the body turns about: an axle, a hinge. Its centre then moves as
+    /// its `angular_velocity` turns it about the hinge (leave `velocity` out).
+    #[serde(default)]
+    #[schemars(extend("unit" = "m", "unbounded" = true))]
+    pub hinge: Option<[Real; 2]>,
+}
+
+/// A rigid body's surface (2D and 3D): how the material meets it, as a wall, and how the other bodies and
+/// the walls meet it (rapier's contacts).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct RigidSurfaceSpec {
     /// Its surface's condition (default: the scene's `wall_condition`).
     #[serde(default)]
     pub condition: Option<WallCondition>,
@@ -359,15 +372,30 @@ pub struct RigidBodySpec {
     #[serde(default)]
     #[schemars(extend("minimum" = 0.0, "maximum" = 1.0, "unit" = "1"))]
     pub restitution: Real,
-    /// A point fixed in the scene that the body turns about: an axle, a hinge. Its centre then moves as
-    /// its `angular_velocity` turns it about the hinge (leave `velocity` out).
-    #[serde(default)]
-    #[schemars(extend("unit" = "m", "unbounded" = true))]
-    pub hinge: Option<[Real; 2]>,
 }
 
-pub(crate) fn default_contact_friction() -> Real {
+fn default_contact_friction() -> Real {
     0.5
+}
+
+impl RigidSurfaceSpec {
+    /// Its condition, the scene's `default` unless it names one; friction on a surface that is not
+    /// separate is refused, naming `key`'s `friction`.
+    pub(crate) fn condition(&self, key: &str, default: WallCondition) -> Result<WallCondition, SceneError> {
+        let condition = self.condition.unwrap_or(default);
+        if self.friction.is_some_and(|mu| mu > 0.0) && condition != WallCondition::Separate {
+            return Err(SceneError::new(
+                format!("{key}.friction"),
+                format!("friction acts on separate surfaces; this body's is {condition:?}").to_lowercase(),
+            ));
+        }
+        Ok(condition)
+    }
+
+    /// How the body meets other bodies and the walls, turning about `hinge` if it has one.
+    pub(crate) fn contact(&self, hinge: Option<Hinge>) -> Contact {
+        Contact { friction: self.contact_friction, restitution: self.restitution, hinge }
+    }
 }
 
 impl RigidBodySpec {
@@ -761,13 +789,7 @@ impl Scene {
             }
         }
         for (k, body) in self.rigid_bodies.iter().enumerate() {
-            let condition = body.condition.unwrap_or(self.wall_condition);
-            if body.friction.is_some_and(|mu| mu > 0.0) && condition != WallCondition::Separate {
-                return Err(SceneError::new(
-                    format!("rigid_bodies[{k}].friction"),
-                    format!("friction acts on separate surfaces; this body's is {condition:?}").to_lowercase(),
-                ));
-            }
+            body.surface.condition(&format!("rigid_bodies[{k}]"), self.wall_condition)?;
             if self.grid.density_wall_correction {
                 return Err(SceneError::new(
                     "grid.density_wall_correction",
@@ -783,7 +805,7 @@ impl Scene {
         }
         let separate = self.wall_condition == WallCondition::Separate
             || conditions.contains(&WallCondition::Separate)
-            || self.rigid_bodies.iter().any(|b| b.condition == Some(WallCondition::Separate));
+            || self.rigid_bodies.iter().any(|b| b.surface.condition == Some(WallCondition::Separate));
         if self.wall_friction > 0.0 && !separate {
             return Err(SceneError::new(
                 "wall_friction",
@@ -917,7 +939,11 @@ impl Scene {
             let key = format!("rigid_bodies[{k}]");
             let (shape, _, _, centre) = body.solid(&key)?;
             shapes.push(shape);
-            conditions.push(self.contact(body.condition.unwrap_or(self.wall_condition), body.friction, true));
+            conditions.push(self.contact(
+                body.surface.condition.unwrap_or(self.wall_condition),
+                body.surface.friction,
+                true,
+            ));
             motions.push(SurfaceMotion { velocity: Point::zeros(), tangential_speed: 0.0, center: None });
             moves.push(Some(Motion::Constant {
                 velocity: body.initial_velocity(&centre),
@@ -1086,7 +1112,7 @@ impl Scene {
             inertia[(2, 2)] = polar;
             bodies.push(RigidBody { wall: self.walls.len() + k, mass, inertia, centre });
             let hinge = spec.hinge.map(|[x, y]| ([x, y, 0.0], [0.0, 0.0, 1.0]));
-            contacts.push(Contact { friction: spec.contact_friction, restitution: spec.restitution, hinge });
+            contacts.push(spec.surface.contact(hinge));
         }
         let contacts: Option<Box<dyn Contacts<2>>> =
             (!bodies.is_empty()).then(|| Box::new(Contacts2::new(&region, &bodies, contacts, h)) as _);

@@ -3,7 +3,7 @@
 //! cylinders; [`crate::geometry3`]), 3D bodies (boxes, spheres, cylinders) and rigid bodies (boxes,
 //! spheres, cylinders, meshes), and how a `Simulation<3>` is built from it.
 
-use crate::contact::{Contact, Contacts, Contacts3, Hinge};
+use crate::contact::{Contacts, Contacts3, Hinge};
 use crate::geometry::{Region, Side};
 use crate::geometry3::{Solid, Wall3, Walls3};
 use crate::grid::GridLayout;
@@ -14,8 +14,8 @@ use crate::motion::{Motion3, WallPose};
 use crate::particles::Particles;
 use crate::rigid::RigidBody;
 use crate::scene::{
-    default_side, friction, inside, one, time_step, AugmentedSpec, MemoryEstimate, SceneError, Seeding, SideSpec,
-    TimeSpec, MAX_GRID_NODES, MAX_SEED_CANDIDATES,
+    default_side, friction, inside, one, time_step, AugmentedSpec, MemoryEstimate, RigidSurfaceSpec, SceneError,
+    Seeding, SideSpec, TimeSpec, MAX_GRID_NODES, MAX_SEED_CANDIDATES,
 };
 use crate::simulation::{Model, Simulation};
 use crate::treatment::augmented::AugmentedGrid;
@@ -490,23 +490,8 @@ pub struct RigidBody3Spec {
     #[serde(default)]
     #[schemars(extend("unit" = "rad/s", "unbounded" = true))]
     pub angular_velocity: [Real; 3],
-    /// Its surface's condition (default: the scene's `wall_condition`).
-    #[serde(default)]
-    pub condition: Option<WallCondition>,
-    /// Coulomb friction coefficient μ of a `separate` surface (default: the scene's `wall_friction`).
-    #[serde(default, with = "friction::optional")]
-    #[schemars(schema_with = "friction::optional_schema")]
-    pub friction: Option<Real>,
-    /// Coulomb friction coefficient of its contacts with other bodies and the walls; a contact takes the
-    /// larger of its two sides' (a wall's is 0).
-    #[serde(default = "crate::scene::default_contact_friction")]
-    #[schemars(extend("minimum" = 0.0, "unit" = "1"))]
-    pub contact_friction: Real,
-    /// Restitution of its contacts with other bodies and the walls: 0 stops them, 1 bounces elastically;
-    /// a contact takes the larger of its two sides'.
-    #[serde(default)]
-    #[schemars(extend("minimum" = 0.0, "maximum" = 1.0, "unit" = "1"))]
-    pub restitution: Real,
+    #[serde(flatten)]
+    pub surface: RigidSurfaceSpec,
     /// A point fixed in the scene that the body turns about, with `hinge_axis`: an axle, a hinge. Its
     /// centre then moves as its `angular_velocity` (along the axis) turns it about the hinge (leave
     /// `velocity` out).
@@ -759,14 +744,7 @@ impl Scene3 {
             let key = format!("rigid_bodies[{k}]");
             body.solid(&key)?;
             body.hinge(&key)?;
-            let condition = body.condition.unwrap_or(self.wall_condition);
-            if body.friction.is_some_and(|mu| mu > 0.0) && condition != WallCondition::Separate {
-                return Err(SceneError::new(
-                    format!("{key}.friction"),
-                    format!("friction acts on separate surfaces; this body's is {condition:?}").to_lowercase(),
-                ));
-            }
-            separate |= condition == WallCondition::Separate;
+            separate |= body.surface.condition(&key, self.wall_condition)? == WallCondition::Separate;
         }
         if self.wall_friction > 0.0 && !separate {
             return Err(SceneError::new(
@@ -879,7 +857,7 @@ impl Scene3 {
         for (k, body) in self.rigid_bodies.iter().enumerate() {
             let (solid, _, _, centre) = body.solid(&format!("rigid_bodies[{k}]"))?;
             walls.push(Wall3 { solid, side: Side::Outside });
-            let contact = self.contact(body.condition.unwrap_or(self.wall_condition), body.friction);
+            let contact = self.contact(body.surface.condition.unwrap_or(self.wall_condition), body.surface.friction);
             contacts.push(WallContact { moving: true, ..contact });
             moves.push(Some(Motion3::Constant {
                 velocity: body.initial_velocity(&centre),
@@ -1039,7 +1017,7 @@ impl Scene3 {
             let (_, mass, inertia, centre) = spec.solid(&format!("rigid_bodies[{k}]"))?;
             bodies.push(RigidBody { wall: self.walls.len() + k, mass, inertia, centre });
             let hinge = spec.hinge(&format!("rigid_bodies[{k}]"))?;
-            contacts.push(Contact { friction: spec.contact_friction, restitution: spec.restitution, hinge });
+            contacts.push(spec.surface.contact(hinge));
         }
         let contacts: Option<Box<dyn Contacts<3>>> =
             (!bodies.is_empty()).then(|| Box::new(Contacts3::new(&region, &bodies, contacts, h)) as _);
