@@ -324,6 +324,38 @@ def test_bad_3d_rigid_bodies_are_refused_naming_the_key(body, key):
         augmpm.Simulation(_tank3([body]))
 
 
+DISK = {"shape": "circle", "center": [0.5, 0.6], "radius": 0.05, "mass": 1.0}
+BALL = {"shape": "sphere", "center": [0.5, 0.6, 0.5], "radius": 0.05, "mass": 1.0}
+
+
+@pytest.mark.parametrize(
+    ("first", "second", "key"),
+    [
+        (DISK, {**DISK, "hinge_to": 0}, "rigid_bodies[1].hinge_to"),
+        (DISK, {**DISK, "hinge": [0.5, 0.62], "hinge_to": 1}, "rigid_bodies[1].hinge_to"),
+        (DISK, {**DISK, "hinge": [0.5, 0.62], "hinge_to": 2}, "rigid_bodies[1].hinge_to"),
+        (BALL, {**BALL, "hinge": [0.5, 0.62, 0.5], "hinge_axis": [0, 0, 1], "hinge_to": 1}, "rigid_bodies[1].hinge_to"),
+        (BALL, {**BALL, "hinge_to": 0}, "rigid_bodies[1].hinge_to"),
+    ],
+)
+def test_a_hinge_to_no_other_body_is_refused_naming_the_key(first, second, key):
+    """``hinge_to`` without the ``hinge`` point, naming the body itself or a body the scene lacks: refused,
+    naming the key (2D and 3D)."""
+    tank = _tank3 if len(first["center"]) == 3 else _scene
+    with pytest.raises(augmpm.SceneError, match=re.escape(key)):
+        augmpm.Simulation(tank([first, second]))
+
+
+def test_a_body_hinged_to_another_carries_its_own_velocity():
+    """A body hinged to another body (``hinge_to``) is given its own velocity and spin, which a hinge fixed
+    in the scene refuses (there the velocity follows from the spin about the hinge): accepted, as given."""
+    disk = {**DISK, "hinge": [0.5, 0.62], "hinge_to": 0, "velocity": [0.1, 0.0], "angular_velocity": 2.0}
+    sim = augmpm.Simulation(_scene([DISK, disk]))
+    assert np.allclose(sim.rigid_bodies[1][3:], [0.1, 0.0, 2.0])
+    ball = {**BALL, "hinge": [0.5, 0.62, 0.5], "hinge_axis": [0, 0, 1], "hinge_to": 0, "velocity": [0.1, 0, 0]}
+    augmpm.Simulation(_tank3([BALL, {**ball, "angular_velocity": [1.0, 0.0, 0.0]}]))
+
+
 def test_a_3d_mesh_body_from_a_file_floats_with_the_mass_of_its_volume(tmp_path):
     """3D: a rigid body given as a mesh file (a cube 0.16 m across written as OBJ, its relative ``file`` read
     from the scene's folder) takes the mass of the volume the mesh encloses and, half as dense as water,

@@ -63,12 +63,14 @@ pub trait Contacts<const D: usize>: Send + Sync {
 /// it turns about there (z in 2D).
 pub type Hinge = ([Real; 3], [Real; 3]);
 
-/// How a rigid body meets others: friction and restitution of its contacts, and its hinge if it has one.
+/// How a rigid body meets others: friction and restitution of its contacts, and its hinge if it has one:
+/// fixed in the scene, or in the body `hinge_to` (an index among the bodies) where the scene draws it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Contact {
     pub friction: Real,
     pub restitution: Real,
     pub hinge: Option<Hinge>,
+    pub hinge_to: Option<usize>,
 }
 
 /// The contacts of a 2D scene's rigid bodies, through rapier.
@@ -150,16 +152,25 @@ impl Contacts<2> for Contacts2 {
                     .can_sleep(false);
                 let handle = set.insert(builder);
                 colliders.insert_with_parent(collider(shape, contact.friction, contact.restitution), handle, &mut set);
-                if let Some((at, _)) = contact.hinge {
-                    let hinge = Point::new(at[0], at[1]);
-                    let joint = rp::RevoluteJointBuilder::new()
-                        .local_anchor1(Point2::from(vector(&hinge)))
-                        .local_anchor2(Point2::from(vector(&(hinge - body.centre))));
-                    joints.insert(ground, handle, joint, true);
-                }
                 handle
             })
             .collect();
+        // Each hinge joins its body's frame (its drawing's, about its centre) to the scene or to the body it
+        // is hinged to, at the point where the scene draws it; two hinged bodies do not meet in contacts.
+        for (k, (body, (_, contact))) in bodies.iter().zip(&self.bodies).enumerate() {
+            if let Some((at, _)) = contact.hinge {
+                let hinge = Point::new(at[0], at[1]);
+                let (parent, origin) = match contact.hinge_to {
+                    Some(j) => (handles[j], bodies[j].centre),
+                    None => (ground, Point::zeros()),
+                };
+                let joint = rp::RevoluteJointBuilder::new()
+                    .local_anchor1(Point2::from(vector(&(hinge - origin))))
+                    .local_anchor2(Point2::from(vector(&(hinge - body.centre))))
+                    .contacts_enabled(contact.hinge_to.is_none());
+                joints.insert(parent, handles[k], joint, true);
+            }
+        }
         let params = rp::IntegrationParameters { dt: dt as f64, length_unit: self.h, ..Default::default() };
         rp::PhysicsPipeline::new().step(
             &Vector2::zeros(),
@@ -407,17 +418,24 @@ impl Contacts<3> for Contacts3 {
                     handle,
                     &mut set,
                 );
-                if let Some((point, axis)) = contact.hinge {
-                    // The body's frame is its drawing's, so the axis and the anchor keep their drawn values.
-                    let (point, axis) = (Vector3::from(point).map(|c| c as f64), Vector3::from(axis).map(|c| c as f64));
-                    let joint = rp3::RevoluteJointBuilder::new(nalgebra::Unit::new_normalize(axis))
-                        .local_anchor1(Point3::from(point))
-                        .local_anchor2(Point3::from(point - wide3(&body.centre)));
-                    joints.insert(ground, handle, joint, true);
-                }
                 handle
             })
             .collect();
+        // As in 2D. A body's frame is its drawing's, so the axis and the anchors keep their drawn values.
+        for (k, (body, (_, _, contact))) in bodies.iter().zip(&self.bodies).enumerate() {
+            if let Some((point, axis)) = contact.hinge {
+                let (point, axis) = (Vector3::from(point).map(|c| c as f64), Vector3::from(axis).map(|c| c as f64));
+                let (parent, origin) = match contact.hinge_to {
+                    Some(j) => (handles[j], wide3(&bodies[j].centre)),
+                    None => (ground, Vector3::zeros()),
+                };
+                let joint = rp3::RevoluteJointBuilder::new(nalgebra::Unit::new_normalize(axis))
+                    .local_anchor1(Point3::from(point - origin))
+                    .local_anchor2(Point3::from(point - wide3(&body.centre)))
+                    .contacts_enabled(contact.hinge_to.is_none());
+                joints.insert(parent, handles[k], joint, true);
+            }
+        }
         let params = rp3::IntegrationParameters { dt: dt as f64, length_unit: self.h, ..Default::default() };
         rp3::PhysicsPipeline::new().step(
             &Vector3::zeros(),

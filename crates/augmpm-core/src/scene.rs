@@ -349,6 +349,11 @@ pub struct RigidBodySpec {
     #[serde(default)]
     #[schemars(extend("unit" = "m", "unbounded" = true))]
     pub hinge: Option<[Real; 2]>,
+    /// The body (its index in `rigid_bodies`) whose `hinge` point this one turns about, where the scene
+    /// draws it: a wheel on a cart's axle, the links of a chain. The hinge then moves with that body,
+    /// and the two do not meet in contacts. `velocity` and `angular_velocity` are this body's own.
+    #[serde(default)]
+    pub hinge_to: Option<usize>,
 }
 
 /// A rigid body's surface (2D and 3D): how the material meets it, as a wall, and how the other bodies and
@@ -392,21 +397,45 @@ impl RigidSurfaceSpec {
         Ok(condition)
     }
 
-    /// How the body meets other bodies and the walls, turning about `hinge` if it has one.
-    pub(crate) fn contact(&self, hinge: Option<Hinge>) -> Contact {
-        Contact { friction: self.contact_friction, restitution: self.restitution, hinge }
+    /// How the body meets other bodies and the walls, turning about `hinge` if it has one, in the scene or
+    /// in the body `hinge_to`.
+    pub(crate) fn contact(&self, hinge: Option<Hinge>, hinge_to: Option<usize>) -> Contact {
+        Contact { friction: self.contact_friction, restitution: self.restitution, hinge, hinge_to }
     }
+}
+
+/// Refuses a `hinge_to` (of `rigid_bodies[k]`, one of `n`) that names no other body or comes without its
+/// hinge point; `key` is the body's.
+pub(crate) fn check_hinge_to(
+    key: &str,
+    k: usize,
+    n: usize,
+    hinge: bool,
+    hinge_to: Option<usize>,
+) -> Result<(), SceneError> {
+    let Some(to) = hinge_to else { return Ok(()) };
+    let key = format!("{key}.hinge_to");
+    if to >= n {
+        return Err(SceneError::new(key, format!("names rigid_bodies[{to}]; the scene has {n} rigid bodies")));
+    }
+    if to == k {
+        return Err(SceneError::new(key, "a body cannot be hinged to itself"));
+    }
+    if !hinge {
+        return Err(SceneError::new(key, "give the point the two bodies turn about with hinge"));
+    }
+    Ok(())
 }
 
 impl RigidBodySpec {
     /// The initial velocity (m/s) of its centre of mass at `centre` (m): `velocity`, or about its hinge.
     fn initial_velocity(&self, centre: &Point) -> [Real; 2] {
-        match self.hinge {
-            Some(hinge) => {
+        match (self.hinge, self.hinge_to) {
+            (Some(hinge), None) => {
                 let r = centre - point(&hinge);
                 [-self.angular_velocity * r.y, self.angular_velocity * r.x]
             }
-            None => self.velocity,
+            _ => self.velocity,
         }
     }
 
@@ -796,7 +825,14 @@ impl Scene {
                     format!("not available with moving walls (rigid_bodies[{k}] moves)"),
                 ));
             }
-            if body.hinge.is_some() && body.velocity != [0.0; 2] {
+            check_hinge_to(
+                &format!("rigid_bodies[{k}]"),
+                k,
+                self.rigid_bodies.len(),
+                body.hinge.is_some(),
+                body.hinge_to,
+            )?;
+            if body.hinge.is_some() && body.hinge_to.is_none() && body.velocity != [0.0; 2] {
                 return Err(SceneError::new(
                     format!("rigid_bodies[{k}].velocity"),
                     "a hinged body's centre moves as its angular_velocity turns it about the hinge; leave velocity out",
@@ -1112,7 +1148,7 @@ impl Scene {
             inertia[(2, 2)] = polar;
             bodies.push(RigidBody { wall: self.walls.len() + k, mass, inertia, centre });
             let hinge = spec.hinge.map(|[x, y]| ([x, y, 0.0], [0.0, 0.0, 1.0]));
-            contacts.push(spec.surface.contact(hinge));
+            contacts.push(spec.surface.contact(hinge, spec.hinge_to));
         }
         let contacts: Option<Box<dyn Contacts<2>>> =
             (!bodies.is_empty()).then(|| Box::new(Contacts2::new(&region, &bodies, contacts, h)) as _);

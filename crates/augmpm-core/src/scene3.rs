@@ -502,6 +502,11 @@ pub struct RigidBody3Spec {
     #[serde(default)]
     #[schemars(extend("unit" = "1", "unbounded" = true))]
     pub hinge_axis: Option<[Real; 3]>,
+    /// The body (its index in `rigid_bodies`) whose `hinge` (and `hinge_axis`) this one turns about, where
+    /// the scene draws them: a wheel on a cart's axle, the links of a chain. The hinge then moves with that
+    /// body, and the two do not meet in contacts. `velocity` and `angular_velocity` are this body's own.
+    #[serde(default)]
+    pub hinge_to: Option<usize>,
 }
 
 impl Rigid3Shape {
@@ -520,9 +525,9 @@ impl Rigid3Shape {
 impl RigidBody3Spec {
     /// The initial velocity (m/s) of its centre of mass at `centre` (m): `velocity`, or about its hinge.
     fn initial_velocity(&self, centre: &P3) -> [Real; 3] {
-        match self.hinge {
-            Some(hinge) => p3(&self.angular_velocity).cross(&(centre - p3(&hinge))).into(),
-            None => self.velocity,
+        match (self.hinge, self.hinge_to) {
+            (Some(hinge), None) => p3(&self.angular_velocity).cross(&(centre - p3(&hinge))).into(),
+            _ => self.velocity,
         }
     }
 
@@ -535,6 +540,9 @@ impl RigidBody3Spec {
             (None, Some(_)) => Err(SceneError::new(format!("{key}.hinge"), "hinge_axis is given without a hinge")),
             (Some(point), Some(axis)) => {
                 let axis = direction(&format!("{key}.hinge_axis"), &axis)?;
+                if self.hinge_to.is_some() {
+                    return Ok(Some((point, axis.into())));
+                }
                 if self.velocity != [0.0; 3] {
                     return Err(SceneError::new(
                         format!("{key}.velocity"),
@@ -744,6 +752,7 @@ impl Scene3 {
             let key = format!("rigid_bodies[{k}]");
             body.solid(&key)?;
             body.hinge(&key)?;
+            crate::scene::check_hinge_to(&key, k, self.rigid_bodies.len(), body.hinge.is_some(), body.hinge_to)?;
             separate |= body.surface.condition(&key, self.wall_condition)? == WallCondition::Separate;
         }
         if self.wall_friction > 0.0 && !separate {
@@ -1017,7 +1026,7 @@ impl Scene3 {
             let (_, mass, inertia, centre) = spec.solid(&format!("rigid_bodies[{k}]"))?;
             bodies.push(RigidBody { wall: self.walls.len() + k, mass, inertia, centre });
             let hinge = spec.hinge(&format!("rigid_bodies[{k}]"))?;
-            contacts.push(spec.surface.contact(hinge));
+            contacts.push(spec.surface.contact(hinge, spec.hinge_to));
         }
         let contacts: Option<Box<dyn Contacts<3>>> =
             (!bodies.is_empty()).then(|| Box::new(Contacts3::new(&region, &bodies, contacts, h)) as _);

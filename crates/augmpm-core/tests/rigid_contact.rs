@@ -229,3 +229,106 @@ fn a_ball_on_a_3d_hinge_swings_as_a_pendulum() {
     assert!((turns[1] / period - 1.0).abs() < 0.01, "period {:.4} s, expected {period:.4} s", turns[1]);
     assert!(worst < 1e-5 * d, "the centre strayed {worst:e} m from d = {d} m");
 }
+
+/// Two bodies hinged to each other (`hinge_to`) and falling freely: the joint's forces are internal, so
+/// their total momentum gains exactly M g t (to 1e-12 of it: round-off in rapier's equal and opposite
+/// impulses); an ideal hinge does no work, so the motion about their common centre of mass keeps its
+/// kinetic energy (within 1%: rapier's joint stabilisation takes 0.05%); and the hinge point of each stays
+/// on the other's (within 1e-6 m, 3e-5 of a cell). The disk overlaps the square's corner: hinged bodies do
+/// not meet in contacts, which would push them apart (and break the energy bound).
+#[test]
+fn two_hinged_bodies_fall_together_turning_about_their_hinge() {
+    let (hinge, disk, r, w) = ([0.5, 0.8], [0.52, 0.78], 0.04, 6.0);
+    // The disk turns about the hinge while the square is still: the hinge's two points move together.
+    let v = [-w * (disk[1] - hinge[1]), w * (disk[0] - hinge[0])];
+    let rigid = format!(
+        r#"{{"shape": "polygon", "vertices": [[0.4, 0.8], [0.5, 0.8], [0.5, 0.9], [0.4, 0.9]], "density": 500.0}},
+           {{"shape": "circle", "center": [{}, {}], "radius": {r}, "density": 800.0, "velocity": [{}, {}],
+             "angular_velocity": {w}, "hinge": [{}, {}], "hinge_to": 0}}"#,
+        disk[0], disk[1], v[0], v[1], hinge[0], hinge[1]
+    );
+    let mut sim = tank(&rigid, -G);
+    let masses = [500.0 * 0.01, 800.0 * std::f64::consts::PI * r * r];
+    let inertia = [masses[0] * 0.02 / 12.0, 0.5 * masses[1] * r * r];
+    let drawn = [nalgebra::Vector2::new(0.45, 0.85), nalgebra::Vector2::new(disk[0], disk[1])];
+    let total = masses[0] + masses[1];
+    let state = |sim: &Simulation<2>| {
+        let b = sim.rigid_bodies();
+        let p: nalgebra::Vector2<f64> = (0..2).map(|k| b[k].2 * masses[k]).sum();
+        let kinetic: f64 =
+            (0..2).map(|k| 0.5 * (masses[k] * b[k].2.norm_squared() + inertia[k] * b[k].3[2].powi(2))).sum();
+        // The hinge where each body carries it now.
+        let at = |k: usize| {
+            nalgebra::Rotation2::new(b[k].1[2]) * (nalgebra::Vector2::new(hinge[0], hinge[1]) - drawn[k]) + b[k].0
+        };
+        (p, kinetic - 0.5 * p.norm_squared() / total, (at(0) - at(1)).norm())
+    };
+    let (p0, relative0, _) = state(&sim);
+    let (mut gap, mut energy): (f64, [f64; 2]) = (0.0, [relative0, relative0]);
+    run_to(&mut sim, 0.15, |sim| {
+        let (_, relative, apart) = state(sim);
+        gap = gap.max(apart);
+        energy = [energy[0].min(relative), energy[1].max(relative)];
+    });
+    let (p, _, _) = state(&sim);
+    let gained = total * G * sim.time();
+    let error = (p - p0 - nalgebra::Vector2::new(0.0, -gained)).norm();
+    assert!(error < 1e-12 * gained, "momentum off M g t = {gained:e} N·s/m by {error:e}");
+    assert!(
+        energy[0] > 0.99 * relative0 && energy[1] < 1.01 * relative0,
+        "kinetic energy about the centre of mass within {energy:?} J/m of {relative0:e} J/m"
+    );
+    assert!(gap < 1e-6, "the two hinge points came {gap:e} m apart");
+}
+
+/// The same in 3D: a ball hinged on an axis (0, 0, 1) to a box's corner edge, falling freely while it
+/// turns about the hinge, overlapping the box's edge: the total momentum gains M g t (to 1e-12 of it), the
+/// kinetic energy about the centre of mass holds within 1%, and the hinge point of each body stays on the
+/// other's within 1e-6 m.
+#[test]
+fn two_hinged_3d_bodies_fall_together_turning_about_their_hinge() {
+    let (hinge, ball, r, w) =
+        (nalgebra::Vector3::new(0.55, 0.8, 0.5), nalgebra::Vector3::new(0.57, 0.78, 0.5), 0.04_f64, 6.0);
+    let spin = nalgebra::Vector3::new(0.0, 0.0, w);
+    let v = spin.cross(&(ball - hinge));
+    let rigid = format!(
+        r#"{{"shape": "box", "center": [0.5, 0.85, 0.5], "size": [0.1, 0.1, 0.1], "density": 500.0}},
+           {{"shape": "sphere", "center": [{}, {}, {}], "radius": {r}, "density": 800.0, "velocity": [{}, {}, {}],
+             "angular_velocity": [0.0, 0.0, {w}], "hinge": [{}, {}, {}], "hinge_axis": [0.0, 0.0, 1.0],
+             "hinge_to": 0}}"#,
+        ball.x, ball.y, ball.z, v.x, v.y, v.z, hinge.x, hinge.y, hinge.z
+    );
+    let mut sim = tank3(&rigid);
+    let masses = [500.0 * 1e-3, 800.0 * 4.0 / 3.0 * std::f64::consts::PI * r.powi(3)];
+    let inertia = [masses[0] * 0.02 / 12.0, 0.4 * masses[1] * r * r];
+    let drawn = [nalgebra::Vector3::new(0.5, 0.85, 0.5), ball];
+    let total = masses[0] + masses[1];
+    let state = |sim: &augmpm_core::Simulation<3>| {
+        let b = sim.rigid_bodies();
+        let p: nalgebra::Vector3<f64> = (0..2).map(|k| b[k].2 * masses[k]).sum();
+        let kinetic: f64 = (0..2)
+            .map(|k| {
+                0.5 * (masses[k] * b[k].2.norm_squared() + inertia[k] * nalgebra::Vector3::from(b[k].3).norm_squared())
+            })
+            .sum();
+        let at = |k: usize| nalgebra::Rotation3::new(nalgebra::Vector3::from(b[k].1)) * (hinge - drawn[k]) + b[k].0;
+        (p, kinetic - 0.5 * p.norm_squared() / total, (at(0) - at(1)).norm())
+    };
+    let (p0, relative0, _) = state(&sim);
+    let (mut gap, mut energy): (f64, [f64; 2]) = (0.0, [relative0, relative0]);
+    while sim.time() < 0.15 {
+        sim.step().expect("step");
+        let (_, relative, apart) = state(&sim);
+        gap = gap.max(apart);
+        energy = [energy[0].min(relative), energy[1].max(relative)];
+    }
+    let (p, _, _) = state(&sim);
+    let gained = total * G * sim.time();
+    let error = (p - p0 - nalgebra::Vector3::new(0.0, -gained, 0.0)).norm();
+    assert!(error < 1e-12 * gained, "momentum off M g t = {gained:e} N·s/m by {error:e}");
+    assert!(
+        energy[0] > 0.99 * relative0 && energy[1] < 1.01 * relative0,
+        "kinetic energy about the centre of mass within {energy:?} J of {relative0:e} J"
+    );
+    assert!(gap < 1e-6, "the two hinge points came {gap:e} m apart");
+}
