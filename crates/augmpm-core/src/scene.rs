@@ -345,7 +345,8 @@ pub struct RigidBodySpec {
     #[serde(flatten)]
     pub surface: RigidSurfaceSpec,
     /// A point fixed in the scene that the body turns about: an axle, a hinge. Its centre then moves as
-    /// its `angular_velocity` turns it about the hinge (leave `velocity` out).
+    /// its `angular_velocity` turns it about the hinge (leave `velocity` out). With `hinge_to`, the point
+    /// is fixed in that body instead.
     #[serde(default)]
     #[schemars(extend("unit" = "m", "unbounded" = true))]
     pub hinge: Option<[Real; 2]>,
@@ -353,6 +354,7 @@ pub struct RigidBodySpec {
     /// draws it: a wheel on a cart's axle, the links of a chain. The hinge then moves with that body,
     /// and the two do not meet in contacts. `velocity` and `angular_velocity` are this body's own.
     #[serde(default)]
+    #[schemars(extend("unit" = "index"))]
     pub hinge_to: Option<usize>,
 }
 
@@ -428,7 +430,8 @@ pub(crate) fn check_hinge_to(
 }
 
 impl RigidBodySpec {
-    /// The initial velocity (m/s) of its centre of mass at `centre` (m): `velocity`, or about its hinge.
+    /// The initial velocity (m/s) of its centre of mass at `centre` (m): about its hinge if that is fixed
+    /// in the scene, else `velocity`.
     fn initial_velocity(&self, centre: &Point) -> [Real; 2] {
         match (self.hinge, self.hinge_to) {
             (Some(hinge), None) => {

@@ -494,7 +494,7 @@ pub struct RigidBody3Spec {
     pub surface: RigidSurfaceSpec,
     /// A point fixed in the scene that the body turns about, with `hinge_axis`: an axle, a hinge. Its
     /// centre then moves as its `angular_velocity` (along the axis) turns it about the hinge (leave
-    /// `velocity` out).
+    /// `velocity` out). With `hinge_to`, the point and axis are fixed in that body instead.
     #[serde(default)]
     #[schemars(extend("unit" = "m", "unbounded" = true))]
     pub hinge: Option<[Real; 3]>,
@@ -506,6 +506,7 @@ pub struct RigidBody3Spec {
     /// the scene draws them: a wheel on a cart's axle, the links of a chain. The hinge then moves with that
     /// body, and the two do not meet in contacts. `velocity` and `angular_velocity` are this body's own.
     #[serde(default)]
+    #[schemars(extend("unit" = "index"))]
     pub hinge_to: Option<usize>,
 }
 
@@ -523,7 +524,8 @@ impl Rigid3Shape {
 }
 
 impl RigidBody3Spec {
-    /// The initial velocity (m/s) of its centre of mass at `centre` (m): `velocity`, or about its hinge.
+    /// The initial velocity (m/s) of its centre of mass at `centre` (m): about its hinge if that is fixed
+    /// in the scene, else `velocity`.
     fn initial_velocity(&self, centre: &P3) -> [Real; 3] {
         match (self.hinge, self.hinge_to) {
             (Some(hinge), None) => p3(&self.angular_velocity).cross(&(centre - p3(&hinge))).into(),
