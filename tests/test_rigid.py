@@ -298,6 +298,36 @@ def test_a_dam_break_swings_a_hinged_flap_open():
     assert strayed < 1e-6
 
 
+def test_a_double_pendulum_swings_into_water_on_its_two_hinges():
+    """Joints between bodies: ``rigid/double_pendulum`` (32 cells, 0.6 s): the second bar, hinged to the first
+    (``hinge_to``), sweeps through the water (the water's impulse on it tops 1 N·s/m) while the first bar's
+    hinge stays fixed in the scene within 1e-6 m and the two bars' hinge points stay together within 1e-5 m
+    (rapier solves each joint to about 1e-6 m); nothing drives the scene, so its energy never rises from one
+    sample (every 0.05 s) to the next; no water enters a bar at any sample."""
+    sim = rigid.shipped("double_pendulum", "augmented", 32)
+    drawn = [np.array([0.385, 0.7]), np.array([0.185, 0.7])]
+
+    def carried(k, point):
+        """Where body k now carries the scene's ``point`` as drawn."""
+        x, y, angle = sim.rigid_bodies[k][:3]
+        c, s = math.cos(angle), math.sin(angle)
+        return np.array([x, y]) + np.array([[c, -s], [s, c]]) @ (np.array(point) - drawn[k])
+
+    energy, inside, fixed, joined, rises = rigid.energy(sim), 0, 0.0, 0.0, []
+    while sim.time < 0.6 - 1e-9:
+        sim.step(max(1, round(0.05 / sim.dt)))
+        inside = max(inside, sim.metrics()["n_outside"])
+        fixed = max(fixed, np.abs(carried(0, [0.5, 0.7]) - [0.5, 0.7]).max())
+        joined = max(joined, np.abs(carried(0, [0.27, 0.7]) - carried(1, [0.27, 0.7])).max())
+        rises.append(rigid.energy(sim) - energy)
+        energy += rises[-1]
+    assert inside == 0
+    assert fixed < 1e-6
+    assert joined < 1e-5
+    assert max(rises) <= 0.0, rises
+    assert np.abs(sim.wall_impulse[len(sim.scene.walls) + 1]).max() > 1.0
+
+
 @pytest.mark.parametrize(
     ("body", "key"),
     [
