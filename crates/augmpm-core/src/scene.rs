@@ -346,15 +346,16 @@ pub struct RigidBodySpec {
     pub surface: RigidSurfaceSpec,
     /// A point fixed in the scene that the body turns about: an axle, a hinge. Its centre then moves as
     /// its `angular_velocity` turns it about the hinge (leave `velocity` out). With `hinge_to`, the point
-    /// is fixed in that body instead.
+    /// is fixed in that body instead, and `velocity` is the body's own.
     #[serde(default)]
     #[schemars(extend("unit" = "m", "unbounded" = true))]
     pub hinge: Option<[Real; 2]>,
-    /// The body (its index in `rigid_bodies`) whose `hinge` point this one turns about, where the scene
-    /// draws it: a wheel on a cart's axle, the links of a chain. The hinge then moves with that body,
-    /// and the two do not meet in contacts. `velocity` and `angular_velocity` are this body's own.
+    /// The body (its index in `rigid_bodies`) that this body's `hinge` point is fixed in, where the scene
+    /// draws it: a wheel on a cart's axle, the links of a chain. The two do not meet in contacts. This body
+    /// starts with the `velocity` and `angular_velocity` it is given: give them so that the hinge point
+    /// moves alike in both bodies, or the joint evens them out in the first step.
     #[serde(default)]
-    #[schemars(extend("unit" = "index"))]
+    #[schemars(extend("unit" = "1"))]
     pub hinge_to: Option<usize>,
 }
 
@@ -406,22 +407,25 @@ impl RigidSurfaceSpec {
     }
 }
 
-/// Refuses a `hinge_to` (of `rigid_bodies[k]`, one of `n`) that names no other body or comes without its
-/// hinge point; `key` is the body's.
-pub(crate) fn check_hinge_to(
-    key: &str,
-    k: usize,
-    n: usize,
-    hinge: bool,
-    hinge_to: Option<usize>,
-) -> Result<(), SceneError> {
-    let Some(to) = hinge_to else { return Ok(()) };
+/// Refuses the `hinge_to` of `rigid_bodies[k]` (`hinged_to`: every body's `hinge_to`) that names no other
+/// body, names a body hinged back to this one (one hinge joins two bodies; longer loops are linkages and
+/// stay allowed) or comes without its hinge point (`hinge`); `key` is the body's.
+pub(crate) fn check_hinge_to(key: &str, k: usize, hinged_to: &[Option<usize>], hinge: bool) -> Result<(), SceneError> {
+    let Some(to) = hinged_to[k] else { return Ok(()) };
     let key = format!("{key}.hinge_to");
+    let n = hinged_to.len();
     if to >= n {
-        return Err(SceneError::new(key, format!("names rigid_bodies[{to}]; the scene has {n} rigid bodies")));
+        let bodies = if n == 1 { "1 rigid body".to_string() } else { format!("{n} rigid bodies") };
+        return Err(SceneError::new(key, format!("names rigid_bodies[{to}]; the scene has {bodies}")));
     }
     if to == k {
         return Err(SceneError::new(key, "a body cannot be hinged to itself"));
+    }
+    if hinged_to[to] == Some(k) {
+        return Err(SceneError::new(
+            key,
+            format!("rigid_bodies[{to}] is hinged to this body already; one hinge joins two bodies"),
+        ));
     }
     if !hinge {
         return Err(SceneError::new(key, "give the point the two bodies turn about with hinge"));
@@ -828,13 +832,8 @@ impl Scene {
                     format!("not available with moving walls (rigid_bodies[{k}] moves)"),
                 ));
             }
-            check_hinge_to(
-                &format!("rigid_bodies[{k}]"),
-                k,
-                self.rigid_bodies.len(),
-                body.hinge.is_some(),
-                body.hinge_to,
-            )?;
+            let hinged_to: Vec<_> = self.rigid_bodies.iter().map(|b| b.hinge_to).collect();
+            check_hinge_to(&format!("rigid_bodies[{k}]"), k, &hinged_to, body.hinge.is_some())?;
             if body.hinge.is_some() && body.hinge_to.is_none() && body.velocity != [0.0; 2] {
                 return Err(SceneError::new(
                     format!("rigid_bodies[{k}].velocity"),

@@ -494,7 +494,8 @@ pub struct RigidBody3Spec {
     pub surface: RigidSurfaceSpec,
     /// A point fixed in the scene that the body turns about, with `hinge_axis`: an axle, a hinge. Its
     /// centre then moves as its `angular_velocity` (along the axis) turns it about the hinge (leave
-    /// `velocity` out). With `hinge_to`, the point and axis are fixed in that body instead.
+    /// `velocity` out). With `hinge_to`, the point and axis are fixed in that body instead, and `velocity`
+    /// and `angular_velocity` are the body's own.
     #[serde(default)]
     #[schemars(extend("unit" = "m", "unbounded" = true))]
     pub hinge: Option<[Real; 3]>,
@@ -502,11 +503,12 @@ pub struct RigidBody3Spec {
     #[serde(default)]
     #[schemars(extend("unit" = "1", "unbounded" = true))]
     pub hinge_axis: Option<[Real; 3]>,
-    /// The body (its index in `rigid_bodies`) whose `hinge` (and `hinge_axis`) this one turns about, where
-    /// the scene draws them: a wheel on a cart's axle, the links of a chain. The hinge then moves with that
-    /// body, and the two do not meet in contacts. `velocity` and `angular_velocity` are this body's own.
+    /// The body (its index in `rigid_bodies`) that this body's `hinge` point and `hinge_axis` are fixed in,
+    /// where the scene draws them: a wheel on a cart's axle, the links of a chain. The two do not meet in
+    /// contacts. This body starts with the `velocity` and `angular_velocity` it is given: give them so that
+    /// the hinge point moves alike in both bodies, or the joint evens them out in the first step.
     #[serde(default)]
-    #[schemars(extend("unit" = "index"))]
+    #[schemars(extend("unit" = "1"))]
     pub hinge_to: Option<usize>,
 }
 
@@ -754,7 +756,8 @@ impl Scene3 {
             let key = format!("rigid_bodies[{k}]");
             body.solid(&key)?;
             body.hinge(&key)?;
-            crate::scene::check_hinge_to(&key, k, self.rigid_bodies.len(), body.hinge.is_some(), body.hinge_to)?;
+            let hinged_to: Vec<_> = self.rigid_bodies.iter().map(|b| b.hinge_to).collect();
+            crate::scene::check_hinge_to(&key, k, &hinged_to, body.hinge.is_some())?;
             separate |= body.surface.condition(&key, self.wall_condition)? == WallCondition::Separate;
         }
         if self.wall_friction > 0.0 && !separate {
