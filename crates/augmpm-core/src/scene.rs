@@ -824,6 +824,7 @@ impl Scene {
                 }
             }
         }
+        let hinged_to: Vec<_> = self.rigid_bodies.iter().map(|b| b.hinge_to).collect();
         for (k, body) in self.rigid_bodies.iter().enumerate() {
             body.surface.condition(&format!("rigid_bodies[{k}]"), self.wall_condition)?;
             if self.grid.density_wall_correction {
@@ -832,7 +833,6 @@ impl Scene {
                     format!("not available with moving walls (rigid_bodies[{k}] moves)"),
                 ));
             }
-            let hinged_to: Vec<_> = self.rigid_bodies.iter().map(|b| b.hinge_to).collect();
             check_hinge_to(&format!("rigid_bodies[{k}]"), k, &hinged_to, body.hinge.is_some())?;
             if body.hinge.is_some() && body.hinge_to.is_none() && body.velocity != [0.0; 2] {
                 return Err(SceneError::new(

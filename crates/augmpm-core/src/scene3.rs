@@ -752,11 +752,11 @@ impl Scene3 {
             }
             separate |= condition == WallCondition::Separate;
         }
+        let hinged_to: Vec<_> = self.rigid_bodies.iter().map(|b| b.hinge_to).collect();
         for (k, body) in self.rigid_bodies.iter().enumerate() {
             let key = format!("rigid_bodies[{k}]");
             body.solid(&key)?;
             body.hinge(&key)?;
-            let hinged_to: Vec<_> = self.rigid_bodies.iter().map(|b| b.hinge_to).collect();
             crate::scene::check_hinge_to(&key, k, &hinged_to, body.hinge.is_some())?;
             separate |= body.surface.condition(&key, self.wall_condition)? == WallCondition::Separate;
         }
