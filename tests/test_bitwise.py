@@ -22,7 +22,10 @@ from .conftest import SCENES
 
 #: (scene, method): first 16 hex digits of the SHA-256 of x, v, C, F and J_p after the steps below
 #: (recorded 2026-12-01 at the commit that added this test; the paper scenes' digests are the same at
-#: a6bd882, before that day's centred weights and module moves).
+#: a6bd882, before that day's centred weights and module moves). The bench dam break's augmented digest, the
+#: moving scenes' and the validation cases' augmented digests re-recorded 2026-12-02 at the commit where a
+#: particle next to a wall keeps its spin over its own grid points (stable transfer only: the paper scenes
+#: run the paper's transfer and are unchanged).
 DIGESTS = {
     ("elastic_incline_fullslip", "naive"): "6030166693fd2bca",
     ("elastic_incline_fullslip", "augmented"): "d86ed2f15d561dea",
@@ -35,7 +38,7 @@ DIGESTS = {
     ("snow_incline_fullslip", "naive"): "fd6bba9570be0f45",
     ("snow_incline_fullslip", "augmented"): "1bb669829def21c3",
     ("bench_dam_break_128", "naive"): "ff2a70980c04c51a",
-    ("bench_dam_break_128", "augmented"): "09178838ef3004f5",
+    ("bench_dam_break_128", "augmented"): "13372aa054990bde",
 }
 #: Steps run: the paper's bodies reach the walls after about 500 steps.
 PAPER_STEPS, BENCH_STEPS = 2000, 300
@@ -57,23 +60,23 @@ VALIDATION_SCENES: dict[str, Callable[[], dict]] = {
 #: f17a8f1, before the scene schema and the restructuring of issue 12).
 VALIDATION_DIGESTS: dict[tuple[str, str], str] = {
     ("poiseuille", "naive"): "fa03c6b343752aec",
-    ("poiseuille", "augmented"): "5a43226f3443d20d",
+    ("poiseuille", "augmented"): "c48e4bef989efac3",
     ("couette", "naive"): "9ad327bcca4d6096",
-    ("couette", "augmented"): "6d2dabc7f8465adf",
+    ("couette", "augmented"): "79ed05c2e00489ee",
     ("dam_break", "naive"): "74d63de6f6034dc3",
-    ("dam_break", "augmented"): "83dd1af94ea8a1a5",
+    ("dam_break", "augmented"): "4d851b4e66a09ab4",
     ("incline", "naive"): "e08fd017d4a3abde",
-    ("incline", "augmented"): "cdfe9e3862c99600",
+    ("incline", "augmented"): "0354eedc08d8ec26",
     ("hydrostatic", "naive"): "5ae639dbfe335d1b",
-    ("hydrostatic", "augmented"): "3b285f33178e6106",
+    ("hydrostatic", "augmented"): "c4b841d31879cbbb",
     ("hydrostatic_grid_density", "naive"): "2e0e330559dcb3f4",
-    ("hydrostatic_grid_density", "augmented"): "e975e4c84b8e0546",
+    ("hydrostatic_grid_density", "augmented"): "2e7f2081ab9f1261",
     ("hydrostatic_density_corrected", "naive"): "059c76eee3cb2789",
-    ("hydrostatic_density_corrected", "augmented"): "f9d497d8f2a2c066",
+    ("hydrostatic_density_corrected", "augmented"): "f4c5684484126b40",
     ("rotation_fullslip", "naive"): "b05c831e7922191c",
-    ("rotation_fullslip", "augmented"): "7ac86abc4c99eb2f",
+    ("rotation_fullslip", "augmented"): "ff32311c86b991f6",
     ("rotation_noslip", "naive"): "389940774c7129da",
-    ("rotation_noslip", "augmented"): "20bad1ca3787c10c",
+    ("rotation_noslip", "augmented"): "3c02485bab41908e",
 }
 VALIDATION_STEPS = 300
 
@@ -101,17 +104,17 @@ def test_final_state_is_bitwise_unchanged(scene, method):
 #: wall fit asks a particle on a turning face to end the step on the face where it is then.
 MOVING_DIGESTS: dict[tuple[str, str], str] = {
     ("keyframed_tank", "naive"): "d3b3caa1366aa8af",
-    ("keyframed_tank", "augmented"): "9dbc226065f6dfe6",
+    ("keyframed_tank", "augmented"): "2b7f19ec4d1a339e",
     ("piston", "naive"): "b2c4cd4f605be27f",
-    ("piston", "augmented"): "a6833949a9417298",
+    ("piston", "augmented"): "70f97bf2aa6674b7",
     ("plate_in_snow", "naive"): "a4a850793fb08793",
-    ("plate_in_snow", "augmented"): "f84abd7bda3bbb32",
+    ("plate_in_snow", "augmented"): "f48ccdf9bb82916d",
     ("shaken_tank", "naive"): "776fd2d1ac758813",
-    ("shaken_tank", "augmented"): "d1b3d463030be8bb",
+    ("shaken_tank", "augmented"): "6963763ba02f5448",
     ("stirred_tank", "naive"): "2eb4c473745b3364",
-    ("stirred_tank", "augmented"): "97711c432939d803",
+    ("stirred_tank", "augmented"): "d4e66f928db91f28",
     ("turning_box", "naive"): "0593200aec3e3490",
-    ("turning_box", "augmented"): "db2f2452e3f871b4",
+    ("turning_box", "augmented"): "01dde20c063b95cc",
 }
 MOVING_STEPS = 300
 

@@ -230,6 +230,15 @@ impl<const D: usize> MlsInverse<D> {
         (Self { alpha, beta, gamma }, kind)
     }
 
+    /// The second moment `Σ ŵ d dᵀ` (m²) of the normalised weights `ŵ = w / Σw` this inverse was built from,
+    /// `Σw = total`: `S / Σw + d̄ d̄ᵀ`, with `S = Γ⁻¹` the Schur complement and the mean offset `d̄ = −S β`
+    /// (a regularised system's S includes its floor). `h²/4 I` on a whole regular stencil.
+    pub fn second_moment<Ops: crate::math::DimOps<D>>(&self, total: Real) -> Option<Matrix<D>> {
+        let s = Ops::inverse(&self.gamma)?;
+        let mean = -(s * self.beta);
+        Some(s / total + mean * mean.transpose())
+    }
+
     /// MLS shape function of a node with weight `w` at `dpos = x_i − x_p`:
     /// `phi = w·[M⁻¹P]₀` (value, eq. (4) first row) and `g = w·[M⁻¹P]₁..` (the
     /// rows of eq. (6) that turn stress into nodal force and give ∇v in eq. (4)).

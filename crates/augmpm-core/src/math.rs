@@ -114,6 +114,53 @@ macro_rules! impl_dim_ops {
 impl_dim_ops!(2);
 impl_dim_ops!(3);
 
+/// Twice the axial vector of `a`'s antisymmetric part, `(a_zy − a_yz, a_xz − a_zx, a_yx − a_xy)` (in 2D
+/// only z): with `D = Σ w d dᵀ`, `Σ w d × (A d) = axial(A D)`. So a particle's APIC spin, the angular
+/// momentum of its affine velocity over its grid points, is `m axial(C D)`.
+#[inline]
+pub fn axial<const D: usize>(a: &Matrix<D>) -> Vector<3> {
+    let z = a[(1, 0)] - a[(0, 1)];
+    if D == 3 {
+        Vector::<3>::new(a[(2, 1)] - a[(1, 2)], a[(0, 2)] - a[(2, 0)], z)
+    } else {
+        Vector::<3>::new(0.0, 0.0, z)
+    }
+}
+
+/// The rotation rate `W` with `W d = w × d` (rad/s), for `w` given as a 3-vector (in 2D only its z counts).
+#[inline]
+pub fn rotation_rate<const D: usize>(w: &Vector<3>) -> Matrix<D> {
+    let mut m = Matrix::<D>::zeros();
+    m[(0, 1)] = -w.z;
+    m[(1, 0)] = w.z;
+    if D == 3 {
+        m[(0, 2)] = w.y;
+        m[(2, 0)] = -w.y;
+        m[(1, 2)] = -w.x;
+        m[(2, 1)] = w.x;
+    }
+    m
+}
+
+/// The affine velocity `C + W` that has over second moment `to` (m²) the spin `c` has over `from`:
+/// `axial((C + W) to) = axial(C from)` ([`axial`]), with `W` a rotation rate alone, so its symmetric part
+/// (the strain rate) is `C`'s. `axial(W to) = (tr(to) I − to) w` for `W d = w × d`, which is positive
+/// definite for a positive definite `to`; where it is singular, `C` is returned as it is.
+pub fn keep_spin<const D: usize>(c: &Matrix<D>, from: &Matrix<D>, to: &Matrix<D>) -> Matrix<D> {
+    let missing = axial(&(c * from)) - axial(&(c * to));
+    let trace = to.trace();
+    let w = if D == 3 {
+        let m = nalgebra::Matrix3::<Real>::from_fn(|i, j| if i == j { trace } else { 0.0 } - to[(i, j)]);
+        m.try_inverse().map(|inv| inv * missing)
+    } else {
+        (trace != 0.0).then(|| missing / trace)
+    };
+    match w {
+        Some(w) if w.iter().all(|a| a.is_finite()) => c + rotation_rate::<D>(&w),
+        _ => *c,
+    }
+}
+
 /// Smallest eigenvalue of a symmetric 3×3 matrix, in closed form (Smith 1961, "Eigenvalues of a
 /// symmetric 3 × 3 matrix", Commun. ACM 4(4)): with q = tr/3 and p² = ‖A − qI‖²_F / 6, the eigenvalues are
 /// q + 2p cos(φ + 2πk/3), 3φ = acos(det((A − qI)/p)/2); the smallest is k = 1. Accurate to about
@@ -299,5 +346,49 @@ mod tests {
             assert!(seen.insert(stencil_offset::<3>(k)));
         }
         assert_eq!(seen.len(), 27);
+    }
+
+    /// A particle's APIC spin carried from one second moment to another (`keep_spin`) is the same, the
+    /// strain rate is untouched, and carrying it back returns the matrix (relative 1e-13, a few dozen
+    /// operations on O(1) numbers): in 2D and 3D, on random matrices and random positive definite moments;
+    /// and `axial` is the moment of `A d` about the particle, `Σ w d × (A d)`.
+    #[test]
+    fn keep_spin_moves_the_spin_and_nothing_else() {
+        let mut s = 0x2545f4914f6cdd1du64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for _ in 0..200 {
+            let c3 = Matrix3::from_fn(|_, _| next());
+            let (g, k) = (Matrix3::from_fn(|_, _| next()), Matrix3::from_fn(|_, _| next()));
+            let (from3, to3) = (g * g.transpose() + Matrix3::identity() * 0.01, k * k.transpose() * 0.3);
+            let (c2, from2, to2) = (
+                c3.fixed_view::<2, 2>(0, 0).into_owned(),
+                from3.fixed_view::<2, 2>(0, 0).into_owned(),
+                to3.fixed_view::<2, 2>(0, 0).into_owned(),
+            );
+            let kept3 = keep_spin(&c3, &from3, &to3);
+            assert!((axial(&(kept3 * to3)) - axial(&(c3 * from3))).norm() < 1e-13 * (1.0 + c3.norm()));
+            assert!((kept3.symmetric_part() - c3.symmetric_part()).norm() < 1e-13);
+            assert!((keep_spin(&kept3, &to3, &from3) - c3).norm() < 1e-12 * (1.0 + c3.norm()));
+            let kept2 = keep_spin(&c2, &from2, &to2);
+            assert!((axial(&(kept2 * to2)) - axial(&(c2 * from2))).norm() < 1e-13 * (1.0 + c2.norm()));
+            assert!((kept2.symmetric_part() - c2.symmetric_part()).norm() < 1e-13);
+            assert!((keep_spin(&kept2, &to2, &from2) - c2).norm() < 1e-12 * (1.0 + c2.norm()));
+            // Σ w d × (A d) over a few points against axial(A Σ w d dᵀ).
+            let points: Vec<(f64, Vector<3>)> =
+                (0..5).map(|_| (next() + 0.5, Vector::<3>::new(next(), next(), next()))).collect();
+            let direct = points.iter().fold(Vector::<3>::zeros(), |a, (w, d)| a + d.cross(&(c3 * d)) * *w);
+            let second = points.iter().fold(Matrix3::zeros(), |a, (w, d)| a + d * d.transpose() * *w);
+            assert!((direct - axial(&(c3 * second))).norm() < 1e-13);
+        }
+        // Where the target moment is empty, nothing can carry the spin: C comes back as it was.
+        assert_eq!(
+            keep_spin(&Matrix2::new(1.0, 2.0, 3.0, 4.0), &Matrix2::identity(), &Matrix2::zeros()),
+            Matrix2::new(1.0, 2.0, 3.0, 4.0)
+        );
     }
 }

@@ -204,7 +204,9 @@ per_particle! {
         x: Vector["m"],
         /// Velocity.
         v: Vector["m/s"],
-        /// Affine velocity field, the velocity gradient ∇v of APIC/MLS.
+        /// Affine velocity field, the velocity gradient ∇v of APIC/MLS. Next to a wall of the stable
+        /// augmented grid, the rotation rate that gives it APIC's spin m h²/4 axial(C) over its own grid
+        /// points is added (`WallEntry::affine_velocity`), so the spin is kept as the particle moves.
         c: Matrix["1/s"],
         /// Elastic deformation gradient F.
         f: Matrix["1"],

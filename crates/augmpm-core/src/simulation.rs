@@ -695,8 +695,8 @@ where
         );
         // In the table's order (the particles'), so that the sums do not depend on the threads.
         for push in pushes.iter() {
-            for (wall, impulse) in push.iter() {
-                step_impulse.add(wall, &push.at, impulse);
+            for (wall, impulse, moment) in push.iter() {
+                step_impulse.add_with_moment(wall, impulse, moment);
             }
         }
         for (total, step) in state.wall_impulse.iter_mut().zip(&step_impulse.linear) {

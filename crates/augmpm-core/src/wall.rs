@@ -214,6 +214,13 @@ impl<const D: usize> WallImpulses<D> {
         self.angular[wall] += moment(x, &dp);
     }
 
+    /// Wall `wall` gave `dp` with moment `moment` about the origin.
+    #[inline]
+    pub fn add_with_moment(&mut self, wall: usize, dp: Vector<D>, moment: Vector<3>) {
+        self.linear[wall] += dp;
+        self.angular[wall] += moment;
+    }
+
     /// Back to nothing given, keeping the number of walls.
     pub fn clear(&mut self) {
         self.linear.fill(Vector::<D>::zeros());

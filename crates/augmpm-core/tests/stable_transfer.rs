@@ -83,11 +83,19 @@ fn points_of(s: &Setup, ps: &Particles<2>, p: usize) -> Vec<(usize, Real, Point)
     pts.iter().map(|&(i, w, d)| (i, w / total, d)).collect()
 }
 
-/// The transfers' energy norm: E = ½ Σ_p m_p Σ_i ŵ_ip |v_p + C_p (x_i − x_p)|².
+/// Particle p's affine velocity over its grid points (`WallEntry::affine_velocity`: next to a wall, its
+/// kept affine state with the rotation rate that carries its spin over its own points).
+fn affine(s: &Setup, ps: &Particles<2>, p: usize) -> Matrix2<Real> {
+    s.table.entry(p).map_or(ps.c[p], |e| e.affine_velocity::<Dim<2>>(&ps.c[p], H))
+}
+
+/// The transfers' energy norm: E = ½ Σ_p m_p Σ_i ŵ_ip |v_p + C_p (x_i − x_p)|², C_p the particle's
+/// affine velocity over its points.
 fn energy(s: &Setup, ps: &Particles<2>) -> Real {
     (0..ps.len())
         .map(|p| {
-            let u = |d: &Point| ps.v[p] + ps.c[p] * d;
+            let c = affine(s, ps, p);
+            let u = |d: &Point| ps.v[p] + c * d;
             0.5 * ps.mass[p] * points_of(s, ps, p).iter().map(|(_, w, d)| w * u(d).norm_squared()).sum::<Real>()
         })
         .sum()
@@ -98,8 +106,9 @@ fn energy(s: &Setup, ps: &Particles<2>) -> Real {
 fn momenta(s: &Setup, ps: &Particles<2>) -> (Point, Real) {
     let (mut lin, mut ang) = (Point::zeros(), 0.0);
     for p in 0..ps.len() {
+        let c = affine(s, ps, p);
         for (_, w, d) in points_of(s, ps, p) {
-            let u = ps.v[p] + ps.c[p] * d;
+            let u = ps.v[p] + c * d;
             lin += u * (w * ps.mass[p]);
             ang += (ps.x[p] + d).perp(&u) * w * ps.mass[p];
         }
@@ -210,7 +219,7 @@ proptest! {
         g2p(&t, &s.walls, &dust(), &velocity, &[], &mut ps, 0.0, &mut Vec::new());
         for p in 0..ps.len() {
             prop_assert!((ps.v[p] - field(&ps.x[p])).norm() <= 1e-10, "v {} vs {}", ps.v[p], field(&ps.x[p]));
-            prop_assert!((ps.c[p] - gradient).norm() <= 1e-8, "C {} vs {}", ps.c[p], gradient);
+            prop_assert!((affine(&s, &ps, p) - gradient).norm() <= 1e-8, "C {} vs {}", affine(&s, &ps, p), gradient);
         }
     }
 }

@@ -285,7 +285,7 @@ pub fn p2g<const D: usize>(
                         }
                     });
                 }
-                Some((g, WallEntry { minv, near, total, tilt, .. })) => {
+                Some((g, entry @ WallEntry { minv, near, total, tilt, .. })) => {
                     let mut force = stress * dt;
                     if g.transfer == AugmentedTransfer::Stable
                         && material.smooths_volume_ratio()
@@ -306,6 +306,9 @@ pub fn p2g<const D: usize>(
                         AugmentedTransfer::Stable if total <= 0.0 => {}
                         AugmentedTransfer::Stable => {
                             let share = mp / total;
+                            // The spin the particle carries (APIC's, over the regular second moment) over
+                            // its own grid points' second moment: the grid gets its angular momentum.
+                            let cp = entry.affine_velocity::<Dim<D>>(&cp, h);
                             g.for_each_near_tilted(layout, &x, near, &tilt, |i, w, d| {
                                 let (_, grad) = minv.shape(w, &d);
                                 let m_i = w * share;
@@ -498,6 +501,8 @@ where
             let mut vn = Vector::<D>::zeros();
             let mut cn = Matrix::<D>::zeros();
             let mut held = false;
+            // The affine state kept for the next P2G where it is not the velocity gradient `cn`.
+            let mut spin = None;
             match t.augmented.and_then(|(g, table)| table.entry(p).map(|e| (g, e))) {
                 None => {
                     let (s, origin) = stencil(layout, xp, inv_h);
@@ -508,7 +513,7 @@ where
                     });
                     cn *= apic;
                 }
-                Some((g, WallEntry { minv, near, tilt, slot, .. })) => {
+                Some((g, entry @ WallEntry { minv, near, tilt, slot, .. })) => {
                     let mut push = WallPush::none();
                     g.for_each_near_tilted(layout, xp, near, &tilt, |i, w, d| {
                         let vi = velocity[i];
@@ -540,14 +545,15 @@ where
                                 &mut vn,
                                 &mut cn,
                             );
+                            spin = Some(entry.kept_affine::<Dim<D>>(&cn, h));
                         }
                     }
                     // SAFETY: each particle has its own entry in the table.
-                    unsafe { pushes.update(slot, |q| *q = push.given(mp, *xp)) };
+                    unsafe { pushes.update(slot, |q| *q = push.given(mp)) };
                 }
             }
             *vp = vn;
-            *cp = cn;
+            *cp = spin.unwrap_or(cn);
             let before = *xp;
             *xp += vn * dt;
             let material = &materials[*m as usize];
@@ -555,7 +561,7 @@ where
             if let Some(&rho) = density.get(p).filter(|_| material.smooths_volume_ratio()) {
                 *jpp = ConstitutiveModel::<D>::density(material) / rho;
             }
-            material.update_deformation(fp, jpp, cp, dt);
+            material.update_deformation(fp, jpp, &cn, dt);
             // The particle's kinetic energy must be representable too, or the run's energy is garbage.
             let finite = xp.iter().chain(vp.iter()).chain(fp.iter()).all(|a| a.is_finite())
                 && crate::particles::energy_root(mp, vp) < f64::MAX.sqrt();
@@ -596,7 +602,7 @@ pub fn hold_at_wall<const D: usize>(
     let into = v.dot(&d.normal);
     if d.distance > 0.0 && into > 0.0 {
         *v -= d.normal * into;
-        push.add(d.wall, -d.normal * into);
+        push.add(d.wall, -d.normal * into, x);
         true
     } else {
         false

@@ -6,7 +6,7 @@
 use crate::geometry::Region;
 use crate::grid::{GridLayout, OutOfGrid, GHOST};
 use crate::kernel::{weight, MlsInverse, MlsKind, Moments, Stencil};
-use crate::math::{floor_i64, resize_with_margin, DimOps, Real, Vector};
+use crate::math::{floor_i64, keep_spin, resize_with_margin, DimOps, Matrix, Real, Vector};
 use crate::wall::{BoundaryPoint, WallContact, WallImpulses};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
@@ -769,6 +769,37 @@ pub struct WallEntry<'a, const D: usize> {
     pub tilt: Tilt<D>,
     /// Its index in the table (entries are in particle order).
     pub slot: usize,
+}
+
+impl<const D: usize> WallEntry<'_, D> {
+    /// The stable transfer's affine velocity (1/s) of the particle over its own grid points this step,
+    /// from the affine state `c` (1/s) it keeps between steps; [`WallEntry::kept_affine`] is the way
+    /// back. Particles keep APIC's spin over the regular second moment, `m h²/4 axial(c)` (h in m): over
+    /// its grid points, whose second moment `Σ ŵ d dᵀ` is not h²/4 I next to a wall and changes as it
+    /// moves, the particle's affine velocity differs from `c` by the rotation rate that gives the grid
+    /// that same angular momentum ([`keep_spin`]); its strain rate is `c`'s. So a particle gives the grid
+    /// the angular momentum it took from it (exactly where its weights are centred); the paper's transfer
+    /// keeps the velocity gradient instead.
+    pub fn affine_velocity<Ops: DimOps<D>>(&self, c: &Matrix<D>, h: Real) -> Matrix<D> {
+        match self.minv.second_moment::<Ops>(self.total) {
+            Some(own) => keep_spin(c, &regular_moment(h), &own),
+            None => *c,
+        }
+    }
+
+    /// The affine state the particle keeps between steps of the affine velocity `c` (1/s) fitted over its
+    /// grid points this step: [`WallEntry::affine_velocity`] inverted.
+    pub fn kept_affine<Ops: DimOps<D>>(&self, c: &Matrix<D>, h: Real) -> Matrix<D> {
+        match self.minv.second_moment::<Ops>(self.total) {
+            Some(own) => keep_spin(c, &own, &regular_moment(h)),
+            None => *c,
+        }
+    }
+}
+
+/// The second moment `Σ w d dᵀ` (m²) of the quadratic B-spline weights of a whole stencil, `h²/4 I`.
+fn regular_moment<const D: usize>(h: Real) -> Matrix<D> {
+    Matrix::<D>::identity() * (0.25 * h * h)
 }
 
 impl<const D: usize> WallParticles<D> {

@@ -13,7 +13,7 @@
 use crate::geometry::{WallFeet, MAX_FEET};
 use crate::kernel::{bspline, MlsInverse};
 use crate::math::{wide, Matrix, Real, Vector};
-use crate::wall::{coulomb_kept, WallCondition, WallContact};
+use crate::wall::{coulomb_kept, moment, WallCondition, WallContact};
 
 /// How far inside a face (cell widths) a particle found past it is taken back to over a step.
 pub const PULL_MARGIN: Real = 1e-9;
@@ -25,13 +25,14 @@ pub const PULL_MAX: Real = 0.05;
 /// Most wall terms of one particle: every foot, each with up to three rows (sticky in 3D).
 const MAX_ROWS: usize = MAX_FEET * 3;
 
-/// The velocity change (m/s) each wall gave one particle in G2P, by wall (at most one per foot):
-/// times the particle's mass, the impulse of the wall on it; and where the particle was (m).
+/// The velocity change (m/s) each wall gave one particle in G2P, by wall (at most one per foot), with
+/// its moment about the origin (m²/s) taken where the wall gave it: times the particle's mass, the
+/// impulse of the wall on it and that impulse's moment.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WallPush<const D: usize> {
     wall: [u32; MAX_FEET],
     dv: [Vector<D>; MAX_FEET],
-    pub at: Vector<D>,
+    moment: [Vector<3>; MAX_FEET],
 }
 
 impl<const D: usize> WallPush<D> {
@@ -39,31 +40,39 @@ impl<const D: usize> WallPush<D> {
 
     /// No wall pushed.
     pub fn none() -> Self {
-        Self { wall: [Self::EMPTY; MAX_FEET], dv: [Vector::<D>::zeros(); MAX_FEET], at: Vector::<D>::zeros() }
+        Self {
+            wall: [Self::EMPTY; MAX_FEET],
+            dv: [Vector::<D>::zeros(); MAX_FEET],
+            moment: [Vector::<3>::zeros(); MAX_FEET],
+        }
     }
 
-    /// Adds `dv` (m/s) to what wall `wall` gave.
-    pub fn add(&mut self, wall: usize, dv: Vector<D>) {
+    /// Adds `dv` (m/s), given at `at` (m), to what wall `wall` gave.
+    pub fn add(&mut self, wall: usize, dv: Vector<D>, at: &Vector<D>) {
         let slot = self.wall.iter().position(|&w| w == wall as u32 || w == Self::EMPTY);
         // There are at most MAX_FEET walls in reach of a particle: a slot is always left.
         if let Some(k) = slot {
             self.wall[k] = wall as u32;
             self.dv[k] += dv;
+            self.moment[k] += moment(at, &dv);
         }
     }
 
-    /// The impulses of the walls on a particle of mass `m` at `x`: each velocity change times `m`.
-    pub fn given(mut self, m: Real, x: Vector<D>) -> Self {
-        for dv in &mut self.dv {
+    /// The impulses of the walls on a particle of mass `m` and their moments: each velocity change times
+    /// `m`.
+    pub fn given(mut self, m: Real) -> Self {
+        for (dv, l) in self.dv.iter_mut().zip(&mut self.moment) {
             *dv *= m;
+            *l *= m;
         }
-        self.at = x;
         self
     }
 
-    /// Each wall that pushed and the velocity change it gave.
-    pub fn iter(&self) -> impl Iterator<Item = (usize, Vector<D>)> + '_ {
-        self.wall.iter().zip(&self.dv).take_while(|(&w, _)| w != Self::EMPTY).map(|(&w, &dv)| (w as usize, dv))
+    /// Each wall that pushed, the velocity change it gave and its moment about the origin.
+    pub fn iter(&self) -> impl Iterator<Item = (usize, Vector<D>, Vector<3>)> + '_ {
+        (self.wall.iter().zip(&self.dv).zip(&self.moment))
+            .take_while(|((&w, _), _)| w != Self::EMPTY)
+            .map(|((&w, &dv), &l)| (w as usize, dv, l))
     }
 }
 
@@ -213,7 +222,7 @@ pub fn fit_to_walls<const D: usize>(
         }
     }
     let mut push = WallPush::none();
-    apply_rows(&rows[..len], v, c, &mut push);
+    apply_rows(&rows[..len], x, v, c, &mut push);
     push
 }
 
@@ -300,9 +309,17 @@ fn each_axis<const D: usize>(target: &Vector<D>, row: &mut impl FnMut(Vector<D>,
 }
 
 /// Solves `(Ω⁻¹ + Uᵀ A⁻¹ U) λ = residual` in f64 (at most [`MAX_ROWS`] unknowns, Gaussian
-/// elimination with partial pivoting) and adds `Σ_j λ_j n_j [q0_j, q_jᵀ]` to the fit, each row's part of
-/// `v` to its wall's `push`.
-fn apply_rows<const D: usize>(rows: &[Row<D>], v: &mut Vector<D>, c: &mut Matrix<D>, push: &mut WallPush<D>) {
+/// elimination with partial pivoting) and adds `Σ_j λ_j n_j [q0_j, q_jᵀ]` to the fit of the particle at
+/// `x`, each row's part of `v` to its wall's `push`, given at the row's foot: a row changes the
+/// particle's momentum over its grid points as an impulse there (`docs/stable_transfer.md`, Momentum),
+/// so its moment counts both the change of `v` and the spin of its change of `c`.
+fn apply_rows<const D: usize>(
+    rows: &[Row<D>],
+    x: &Vector<D>,
+    v: &mut Vector<D>,
+    c: &mut Matrix<D>,
+    push: &mut WallPush<D>,
+) {
     let m = rows.len();
     if m == 0 {
         return;
@@ -323,7 +340,7 @@ fn apply_rows<const D: usize>(rows: &[Row<D>], v: &mut Vector<D>, c: &mut Matrix
         let l = l as Real;
         let dv = row.n * (l * row.q0);
         *v += dv;
-        push.add(row.wall, dv);
+        push.add(row.wall, dv, &(x + row.d));
         *c += row.n * (row.q * l).transpose();
     }
 }
