@@ -372,7 +372,7 @@ def bench_rigid(steps: int, threads: int) -> list[dict]:
         for label, motion in (("held", True), ("still", False)):
             sims[label] = Simulation(_held_walls(scene, free, motion), m, threads=threads)
             # The material's state as it is; the bodies' poses stay with the free run.
-            sims[label].restore({**state, "wall_pose": state["wall_pose"][:0]})
+            sims[label].restore({**state, "wall_pose": state["wall_pose"][:0], "body_kick": state["body_kick"][:0]})
         result = interleaved(sims, steps, rounds=4)
         per_step = {k: r["seconds"] / r["steps"] if r["steps"] else math.nan for k, r in result.items()}
         rows.append(

@@ -251,11 +251,12 @@ class Simulation:
 # Simulation.checkpoint); the rest are scalars.
 _STATE_DTYPES = {f["name"]: np.dtype(f["dtype"]) for f in _core.state_fields()}
 # The walls' part of the state: each wall's impulse so far and its moment, and the poses set by set_wall_pose
-# (the rigid bodies' among them).
+# (the rigid bodies' among them); each rigid body's change of velocity over the last step.
 _STATE_DTYPES |= {
     "wall_impulse": np.dtype("float64"),
     "wall_angular_impulse": np.dtype("float64"),
     "wall_pose": np.dtype("float64"),
+    "body_kick": np.dtype("float64"),
 }
 
 

@@ -10,8 +10,9 @@
 //! `c` of the impulse `J` the body gave the material (`L` about the origin), then the pose moves on at the
 //! new velocities, `c' = c + v' dt`. So the body gains exactly the momentum and (in 2D) the angular momentum
 //! about the origin that the material lost at its wall (`c' × m v' = c × m v'`). The material saw the wall
-//! move at the old velocities during the step; the difference, `(v' − v) dt` per step, is followed as any
-//! wall move is. What a body meets besides the material (other bodies, the scene's walls, its hinge) is
+//! move at the old velocities during the step, plus the change that gravity, contacts and joints gave
+//! them over the step before (`State::body_kicks`); the rest of the difference is followed as any wall
+//! move is. What a body meets besides the material (other bodies, the scene's walls, its hinge) is
 //! resolved in [`crate::contact`], which then moves it instead of [`drift`].
 
 use crate::math::{Matrix, Real, Vector};

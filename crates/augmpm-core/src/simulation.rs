@@ -158,6 +158,11 @@ pub struct State<const D: usize> {
     /// The poses set by [`Simulation::set_wall_pose`], by wall (sorted); the other walls move as their
     /// scene says.
     pub wall_poses: Vec<(usize, WallPose<D>)>,
+    /// Per rigid body (in `Model::bodies` order), a velocity change (m/s) and angular velocity change
+    /// (rad/s; in 2D only z) the material sees its wall take ahead over the next step
+    /// ([`State::seen_poses`]): the part of its change over the last step that gravity, contacts and
+    /// joints gave it. Empty before a simulation sizes it.
+    pub body_kicks: Vec<(Vector<D>, Vector<3>)>,
 }
 
 /// The per-particle arrays of a [`State`] beyond its [`Particles`].
@@ -198,6 +203,7 @@ impl<const D: usize> State<D> {
             wall_impulse: Vec::new(),
             wall_angular_impulse: Vec::new(),
             wall_poses: Vec::new(),
+            body_kicks: Vec::new(),
         }
     }
 
@@ -231,6 +237,27 @@ impl<const D: usize> State<D> {
             ("max_cfl", Scalar::Real(&mut self.max_cfl)),
             ("drift", Scalar::Real(&mut self.binning.drift)),
         ]
+    }
+
+    /// The walls' poses as the material sees them over the next step: [`State::wall_poses`], with each of
+    /// the model's rigid `bodies` moving on at its velocities plus the change `body_kicks` shows ahead.
+    /// A body's velocities change at the step's end, after the material moved against its wall; seen at
+    /// the old ones, a body that speeds up into the material (pushed, or falling) would gain on it by
+    /// Δv Δt each step, and the particles at its surface would end the step inside it. A body at rest, or
+    /// moving steadily, is seen as it moves. Its state keeps its own velocities.
+    pub fn seen_poses(&self, bodies: &[RigidBody<D>]) -> std::borrow::Cow<'_, [(usize, WallPose<D>)]> {
+        let state = self;
+        if state.body_kicks.iter().all(|(v, w)| v.iter().chain(w.iter()).all(|&a| a == 0.0)) {
+            return std::borrow::Cow::Borrowed(&state.wall_poses);
+        }
+        let mut poses = state.wall_poses.clone();
+        for (body, (dv, dw)) in bodies.iter().zip(&state.body_kicks) {
+            let i = poses.binary_search_by_key(&body.wall, |&(w, _)| w).expect("a body's wall is posed");
+            let pose = &mut poses[i].1;
+            pose.velocity = (Vector::<D>::from(pose.velocity) + dv).into();
+            pose.angular_velocity = (Vector::<3>::from(pose.angular_velocity) + dw).into();
+        }
+        std::borrow::Cow::Owned(poses)
     }
 
     /// Ends step `step` of `dt` (s) in which the particles moved at most `cells` cell widths and
@@ -273,6 +300,9 @@ impl<const D: usize> State<D> {
         }
         if let Some((w, _)) = self.wall_poses.iter().find(|(_, p)| !p.to_row().iter().all(|a| a.is_finite())) {
             return Err(format!("wall_pose of wall {w} holds non-finite values"));
+        }
+        if self.body_kicks.iter().any(|(v, w)| !(v.iter().chain(w.iter()).all(|a| a.is_finite()))) {
+            return Err("body_kick holds non-finite values".to_string());
         }
         if self.wall_poses.windows(2).any(|p| p[0].0 >= p[1].0) {
             return Err("wall_pose rows must name each wall once, in increasing order".to_string());
@@ -444,6 +474,30 @@ pub struct Simulation<const D: usize> {
     failed: Option<StepError>,
 }
 
+/// How much a body's velocities (m/s, rad/s) changed from `before` to `after`.
+fn velocity_change<const D: usize>(before: &WallPose<D>, after: &WallPose<D>) -> (Vector<D>, Vector<3>) {
+    (
+        Vector::<D>::from(after.velocity) - Vector::<D>::from(before.velocity),
+        Vector::<3>::from(after.angular_velocity) - Vector::<3>::from(before.angular_velocity),
+    )
+}
+
+/// The velocity change a body's wall is shown ahead of in the next step ([`State::body_kicks`]), from its
+/// change over the last step, `total`, and the part of it that the material did not give, `other`
+/// (gravity, contacts, joints): `total` scaled by `other`'s share of it, between 0 and 1. A body driven
+/// into the material from outside (falling freely, pushed by a piston) is shown at its whole change; one
+/// the material alone moves, or holds up against gravity, at none (predicting the material's own push on
+/// it would feed it back a step early, which a light body does not survive); one the material slows,
+/// at none.
+fn ahead<const N: usize>(total: &Vector<N>, other: &Vector<N>) -> Vector<N> {
+    let norm = total.norm_squared();
+    if norm > 0.0 {
+        total * (total.dot(other) / norm).clamp(0.0, 1.0)
+    } else {
+        Vector::<N>::zeros()
+    }
+}
+
 impl<const D: usize> Simulation<D>
 where
     Dim<D>: DimOps<D>,
@@ -607,6 +661,10 @@ where
                 self.model.bodies[k].wall
             ));
         }
+        let bodies = self.model.bodies.len();
+        if !state.body_kicks.is_empty() && state.body_kicks.len() != bodies {
+            return Err(format!("body_kick has {} rows; the scene has {bodies} rigid bodies", state.body_kicks.len()));
+        }
         let layout = &self.model.layout;
         let run = |s: &mut Schedule<D>| s.restore(layout, &p.x, &state.binning);
         match &self.pool {
@@ -621,11 +679,16 @@ where
         if state.wall_angular_impulse.is_empty() {
             state.wall_angular_impulse = vec![Vector::<3>::zeros(); walls];
         }
+        if state.body_kicks.is_empty() {
+            // A checkpoint written before the bodies' kicks were kept: the next step predicts none.
+            state.body_kicks = vec![(Vector::<D>::zeros(), Vector::<3>::zeros()); self.model.bodies.len()];
+        }
         let was_moving = self.model.region.moves();
         self.state = state;
         self.failed = None;
         if was_moving || !self.state.wall_poses.is_empty() {
-            self.model.follow_walls(self.state.time, &self.state.wall_poses);
+            let seen = self.state.seen_poses(&self.model.bodies);
+            self.model.follow_walls(self.state.time, &seen);
             self.scratch.grid.resize(self.model.boundary.num_points(&self.model.layout));
         }
         // The grid is cleared only where the binning says particles were: start from a clean one.
@@ -713,7 +776,8 @@ where
         let failed = failed.or_else(|| self.advance_bodies(step).err());
         // 8. Moving walls go where they are at the end of the step; the treatment follows them.
         if moving {
-            self.model.follow_walls(self.state.time, &self.state.wall_poses);
+            let seen = self.state.seen_poses(&self.model.bodies);
+            self.model.follow_walls(self.state.time, &seen);
         }
         let state = &mut self.state;
         match failed {
@@ -747,6 +811,15 @@ where
                 b.kick(pose, t, dt, &self.model.gravity, &impulse.linear[b.wall], &impulse.angular[b.wall])
             })
             .collect();
+        // What the material alone did to each body's velocities.
+        let by_material: Vec<(Vector<D>, Vector<3>)> = (self.model.bodies.iter())
+            .map(|b| {
+                let pose = &self.state.wall_poses[index(&self.state.wall_poses, b.wall)].1;
+                let only =
+                    b.kick(pose, t, dt, &Vector::<D>::zeros(), &impulse.linear[b.wall], &impulse.angular[b.wall]);
+                velocity_change(pose, &only)
+            })
+            .collect();
         let moved = match &self.model.contacts {
             Some(contacts) => contacts.drift(t, dt, &self.model.bodies, &kicked, self.model.region.as_ref()),
             None => kicked.iter().map(|pose| drift(pose, dt)).collect(),
@@ -757,8 +830,12 @@ where
                 return Err(StepError::BodyTooFast { step, body: k, cells: speed * dt / h });
             }
         }
-        for (body, pose) in self.model.bodies.iter().zip(moved) {
+        self.state.body_kicks.resize(self.model.bodies.len(), (Vector::<D>::zeros(), Vector::<3>::zeros()));
+        let bodies = self.model.bodies.iter().zip(moved).zip(&by_material);
+        for (((body, pose), material), kick) in bodies.zip(&mut self.state.body_kicks) {
             let i = index(&self.state.wall_poses, body.wall);
+            let (dv, dw) = velocity_change(&self.state.wall_poses[i].1, &pose);
+            *kick = (ahead(&dv, &(dv - material.0)), ahead(&dw, &(dw - material.1)));
             self.state.wall_poses[i].1 = pose;
         }
         Ok(())
@@ -793,7 +870,8 @@ where
             Ok(k) => poses[k].1 = pose,
             Err(k) => poses.insert(k, (wall, pose)),
         }
-        self.model.follow_walls(self.state.time, &self.state.wall_poses);
+        let seen = self.state.seen_poses(&self.model.bodies);
+        self.model.follow_walls(self.state.time, &seen);
         self.scratch.grid.resize(self.model.boundary.num_points(&self.model.layout));
         Ok(())
     }
@@ -901,5 +979,27 @@ where
             held_at_wall: state.held_at_wall,
             max_cfl: state.max_cfl,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The velocity change shown ahead is the whole last change where gravity or contacts gave all of it
+    /// or more (a body falling freely, or pushed through the material), none where the material gave all
+    /// of it or held the body against them (floating at rest) or slowed it against them (an impact), and
+    /// the other forces' share between.
+    #[test]
+    fn a_body_is_shown_ahead_what_other_forces_drove() {
+        let v = |x: Real, y: Real| Vector::<2>::new(x, y);
+        let g = v(0.0, -0.01);
+        assert_eq!(ahead(&g, &g), g);
+        assert_eq!(ahead(&v(0.0, -0.004), &v(0.0, -0.01)), v(0.0, -0.004));
+        assert_eq!(ahead(&v(0.3, 0.0), &v(0.0, 0.0)), v(0.0, 0.0));
+        assert_eq!(ahead(&v(0.0, 0.0), &g), v(0.0, 0.0));
+        assert_eq!(ahead(&v(0.0, 0.02), &g), v(0.0, 0.0));
+        let half = ahead(&v(0.0, -0.02), &v(0.0, -0.01));
+        assert!((half - v(0.0, -0.01)).norm() < 1e-15);
     }
 }

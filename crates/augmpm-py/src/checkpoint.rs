@@ -5,7 +5,9 @@
 //! impulse on the material so far, the domain box last), `wall_angular_impulse` (float64, (walls + 1, 3):
 //! its moment about the origin; in 2D only z) and `wall_pose` (float64, (k, 8) in 2D, (k, 14)
 //! in 3D: per wall posed from outside, its index and `WallPose::names`); a checkpoint without them
-//! (written before they were kept) has no impulse counted and no posed wall.
+//! (written before they were kept) has no impulse counted and no posed wall. `body_kick` (float64,
+//! (rigid bodies, D + 3)): per rigid body, the change of its velocity and angular velocity (3 components,
+//! in 2D only z) over the last step; a checkpoint without it predicts none in the next step.
 
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -72,6 +74,12 @@ macro_rules! state_conversions {
                     .collect();
                 let columns = 1 + $core::motion::WallPose::<D>::names().len();
                 d.set_item("wall_pose", PyArray1::from_vec(py, poses).reshape([state.wall_poses.len(), columns])?)?;
+                let kicks: Vec<f64> = state
+                    .body_kicks
+                    .iter()
+                    .flat_map(|(v, w)| v.iter().chain(w.iter()).map(|&a| crate::convert::wide(a)).collect::<Vec<_>>())
+                    .collect();
+                d.set_item("body_kick", PyArray1::from_vec(py, kicks).reshape([state.body_kicks.len(), D + 3])?)?;
                 Ok(d)
             }
 
@@ -113,6 +121,19 @@ macro_rules! state_conversions {
                     state.wall_angular_impulse = flat
                         .chunks(3)
                         .map(|c| $core::math::Vector::<3>::from_fn(|k, _| c[k] as $core::math::Real))
+                        .collect();
+                }
+                if dict.contains("body_kick")? {
+                    let rows = rows_of::<f64>(dict, "body_kick", "float64")?;
+                    let flat = array_of::<f64>(dict, "body_kick", rows, &[D + 3], "float64")?;
+                    state.body_kicks = flat
+                        .chunks(D + 3)
+                        .map(|c| {
+                            (
+                                $core::math::Vector::<D>::from_fn(|k, _| c[k] as $core::math::Real),
+                                $core::math::Vector::<3>::from_fn(|k, _| c[D + k] as $core::math::Real),
+                            )
+                        })
                         .collect();
                 }
                 if dict.contains("wall_pose")? {
