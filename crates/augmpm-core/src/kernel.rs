@@ -368,4 +368,28 @@ mod tests {
         assert_eq!(phi, 0.4);
         assert!((g - d * (0.4 * 4.0 / (h * h))).norm() < 1e-15);
     }
+
+    /// The second moment of the weights an inverse was built from, `Σ ŵ d dᵀ` with `ŵ = w / Σw`, is what
+    /// `second_moment` gives back (relative 1e-12), for points off centre on one side (as next to a wall),
+    /// and `h²/4 I` for the closed form of a whole stencil.
+    #[test]
+    fn second_moment_is_that_of_the_weights() {
+        let h = 0.1;
+        let points = [(0.3, [0.02, -0.05]), (0.9, [0.11, 0.04]), (0.5, [-0.07, 0.09]), (0.2, [0.15, 0.12])];
+        let mut m = Moments::<2>::new();
+        let (mut total, mut direct) = (0.0, nalgebra::Matrix2::<Real>::zeros());
+        for (w, d) in points {
+            let d = Vector2::new(d[0], d[1]);
+            m.add(w, &d);
+            total += w;
+            direct += d * d.transpose() * w;
+        }
+        direct /= total;
+        let (inv, kind) = MlsInverse::from_moments::<crate::math::Dim<2>>(&m, h);
+        assert_eq!(kind, MlsKind::General);
+        let second = inv.second_moment::<crate::math::Dim<2>>(total).unwrap();
+        assert!((second - direct).norm() < 1e-12 * direct.norm(), "{second} vs {direct}");
+        let regular = MlsInverse::<2>::regular(h).second_moment::<crate::math::Dim<2>>(1.0).unwrap();
+        assert!((regular - nalgebra::Matrix2::identity() * (h * h / 4.0)).norm() < 1e-15);
+    }
 }

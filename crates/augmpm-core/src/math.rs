@@ -354,6 +354,12 @@ mod tests {
     /// and `axial` is the moment of `A d` about the particle, `Σ w d × (A d)`.
     #[test]
     fn keep_spin_moves_the_spin_and_nothing_else() {
+        fn check<const D: usize>(c: &Matrix<D>, from: &Matrix<D>, to: &Matrix<D>) {
+            let kept = keep_spin(c, from, to);
+            assert!((axial(&(kept * to)) - axial(&(c * from))).norm() < 1e-13 * (1.0 + c.norm()));
+            assert!((kept.symmetric_part() - c.symmetric_part()).norm() < 1e-13);
+            assert!((keep_spin(&kept, to, from) - c).norm() < 1e-12 * (1.0 + c.norm()));
+        }
         let mut s = 0x2545f4914f6cdd1du64;
         let mut next = || {
             s ^= s << 13;
@@ -370,14 +376,8 @@ mod tests {
                 from3.fixed_view::<2, 2>(0, 0).into_owned(),
                 to3.fixed_view::<2, 2>(0, 0).into_owned(),
             );
-            let kept3 = keep_spin(&c3, &from3, &to3);
-            assert!((axial(&(kept3 * to3)) - axial(&(c3 * from3))).norm() < 1e-13 * (1.0 + c3.norm()));
-            assert!((kept3.symmetric_part() - c3.symmetric_part()).norm() < 1e-13);
-            assert!((keep_spin(&kept3, &to3, &from3) - c3).norm() < 1e-12 * (1.0 + c3.norm()));
-            let kept2 = keep_spin(&c2, &from2, &to2);
-            assert!((axial(&(kept2 * to2)) - axial(&(c2 * from2))).norm() < 1e-13 * (1.0 + c2.norm()));
-            assert!((kept2.symmetric_part() - c2.symmetric_part()).norm() < 1e-13);
-            assert!((keep_spin(&kept2, &to2, &from2) - c2).norm() < 1e-12 * (1.0 + c2.norm()));
+            check(&c3, &from3, &to3);
+            check(&c2, &from2, &to2);
             // Σ w d × (A d) over a few points against axial(A Σ w d dᵀ).
             let points: Vec<(f64, Vector<3>)> =
                 (0..5).map(|_| (next() + 0.5, Vector::<3>::new(next(), next(), next()))).collect();

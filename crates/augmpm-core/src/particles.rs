@@ -205,8 +205,10 @@ per_particle! {
         /// Velocity.
         v: Vector["m/s"],
         /// Affine velocity field, the velocity gradient ∇v of APIC/MLS. Next to a wall of the stable
-        /// augmented grid, the rotation rate that gives it APIC's spin m h²/4 axial(C) over its own grid
-        /// points is added (`WallEntry::affine_velocity`), so the spin is kept as the particle moves.
+        /// augmented grid, the state a particle keeps: its fitted gradient with the rotation rate that
+        /// gives it APIC's regular spin m h²/4 axial(C) (`WallEntry::kept_affine`); P2G turns it back into
+        /// the velocity over the particle's own grid points (`WallEntry::affine_velocity`), so the spin is
+        /// kept as the particle moves. The strain rate (its symmetric part) is the fit's.
         c: Matrix["1/s"],
         /// Elastic deformation gradient F.
         f: Matrix["1"],

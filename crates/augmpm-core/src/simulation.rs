@@ -805,21 +805,16 @@ where
             poses.binary_search_by_key(&wall, |&(w, _)| w).expect("a body's wall is posed")
         };
         let impulse = &self.scratch.step_impulse;
-        let kicked: Vec<WallPose<D>> = (self.model.bodies.iter())
+        // Each body's velocities after the step's impulses and gravity, and what the material alone did to
+        // them.
+        let (kicked, by_material): (Vec<WallPose<D>>, Vec<(Vector<D>, Vector<3>)>) = (self.model.bodies.iter())
             .map(|b| {
                 let pose = &self.state.wall_poses[index(&self.state.wall_poses, b.wall)].1;
-                b.kick(pose, t, dt, &self.model.gravity, &impulse.linear[b.wall], &impulse.angular[b.wall])
+                let (linear, angular) = (&impulse.linear[b.wall], &impulse.angular[b.wall]);
+                let only = b.kick(pose, t, dt, &Vector::<D>::zeros(), linear, angular);
+                (b.kick(pose, t, dt, &self.model.gravity, linear, angular), velocity_change(pose, &only))
             })
-            .collect();
-        // What the material alone did to each body's velocities.
-        let by_material: Vec<(Vector<D>, Vector<3>)> = (self.model.bodies.iter())
-            .map(|b| {
-                let pose = &self.state.wall_poses[index(&self.state.wall_poses, b.wall)].1;
-                let only =
-                    b.kick(pose, t, dt, &Vector::<D>::zeros(), &impulse.linear[b.wall], &impulse.angular[b.wall]);
-                velocity_change(pose, &only)
-            })
-            .collect();
+            .unzip();
         let moved = match &self.model.contacts {
             Some(contacts) => contacts.drift(t, dt, &self.model.bodies, &kicked, self.model.region.as_ref()),
             None => kicked.iter().map(|pose| drift(pose, dt)).collect(),

@@ -6,8 +6,9 @@
 //! its moment about the origin; in 2D only z) and `wall_pose` (float64, (k, 8) in 2D, (k, 14)
 //! in 3D: per wall posed from outside, its index and `WallPose::names`); a checkpoint without them
 //! (written before they were kept) has no impulse counted and no posed wall. `body_kick` (float64,
-//! (rigid bodies, D + 3)): per rigid body, the change of its velocity and angular velocity (3 components,
-//! in 2D only z) over the last step; a checkpoint without it predicts none in the next step.
+//! (rigid bodies, D + 3)): per rigid body, the velocity change (m/s) and angular velocity change (rad/s;
+//! 3 components, in 2D only z) the material sees it take ahead in the next step (`State::body_kicks`); a
+//! checkpoint without it predicts none.
 
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -77,7 +78,7 @@ macro_rules! state_conversions {
                 let kicks: Vec<f64> = state
                     .body_kicks
                     .iter()
-                    .flat_map(|(v, w)| v.iter().chain(w.iter()).map(|&a| crate::convert::wide(a)).collect::<Vec<_>>())
+                    .flat_map(|(v, w)| v.iter().chain(w.iter()).map(|&a| crate::convert::wide(a)))
                     .collect();
                 d.set_item("body_kick", PyArray1::from_vec(py, kicks).reshape([state.body_kicks.len(), D + 3])?)?;
                 Ok(d)

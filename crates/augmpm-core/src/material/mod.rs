@@ -23,7 +23,8 @@ pub struct MaterialPoint<const D: usize> {
     pub f: Matrix<D>,
     /// Plastic volume ratio J_p (1 without plasticity).
     pub jp: Real,
-    /// Velocity gradient ∇v (1/s), the APIC/MLS affine matrix.
+    /// Velocity gradient ∇v (1/s), the APIC/MLS affine matrix the particle keeps (next to a wall of the
+    /// stable augmented grid only its symmetric part, the strain rate, is the fit's: see `Particles::c`).
     pub grad_v: Matrix<D>,
     /// Particle mass (kg, or kg/m in 2D).
     pub mass: Real,

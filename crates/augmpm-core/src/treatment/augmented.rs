@@ -781,18 +781,23 @@ impl<const D: usize> WallEntry<'_, D> {
     /// the angular momentum it took from it (exactly where its weights are centred); the paper's transfer
     /// keeps the velocity gradient instead.
     pub fn affine_velocity<Ops: DimOps<D>>(&self, c: &Matrix<D>, h: Real) -> Matrix<D> {
-        match self.minv.second_moment::<Ops>(self.total) {
-            Some(own) => keep_spin(c, &regular_moment(h), &own),
-            None => *c,
-        }
+        self.carry_spin::<Ops>(c, h, true)
     }
 
     /// The affine state the particle keeps between steps of the affine velocity `c` (1/s) fitted over its
     /// grid points this step: [`WallEntry::affine_velocity`] inverted.
     pub fn kept_affine<Ops: DimOps<D>>(&self, c: &Matrix<D>, h: Real) -> Matrix<D> {
-        match self.minv.second_moment::<Ops>(self.total) {
-            Some(own) => keep_spin(c, &own, &regular_moment(h)),
-            None => *c,
+        self.carry_spin::<Ops>(c, h, false)
+    }
+
+    /// `c` carried from the regular second moment to the particle's own (`to_own`) or back.
+    fn carry_spin<Ops: DimOps<D>>(&self, c: &Matrix<D>, h: Real, to_own: bool) -> Matrix<D> {
+        let Some(own) = self.minv.second_moment::<Ops>(self.total) else { return *c };
+        let regular = regular_moment::<D>(h);
+        if to_own {
+            keep_spin(c, &regular, &own)
+        } else {
+            keep_spin(c, &own, &regular)
         }
     }
 }
