@@ -80,6 +80,32 @@ def test_run_scene_raises_a_failed_run_and_keeps_its_frames(small_scene, tmp_pat
     assert quiet.error == result.error and quiet.frames == result.frames
 
 
+def test_a_frame_that_cannot_be_written_stops_the_run_with_its_rows_complete(small_scene, tmp_path, monkeypatch):
+    """A frame's files are written on a thread of their own while the simulation steps on: a write that
+    fails there (here the fourth frame's VTK file) still stops the run with its error, and ``metrics.csv``
+    holds a row only for frames whose files were all written (the three before it)."""
+    import augmpm.run
+
+    small_scene["time"].update(steps=200, output_interval=10)
+    calls = []
+    write_vtp = augmpm.run.write_vtp
+
+    def failing(path, *args, **kwargs):
+        calls.append(path)
+        if len(calls) == 4:
+            raise OSError(28, "No space left on device")
+        return write_vtp(path, *args, **kwargs)
+
+    monkeypatch.setattr(augmpm.run, "write_vtp", failing)
+    out = tmp_path / "run"
+    with pytest.raises(OSError, match="No space left"):
+        augmpm.run_scene(augmpm.Scene.from_dict(small_scene), out, progress=False, render=False)
+    with open(out / "metrics.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [int(r["step"]) for r in rows] == [0, 10, 20]
+    assert all((out / "vtk" / f"frame_{k:05d}.vtp").is_file() for k in range(3))
+
+
 def test_an_output_path_that_is_a_file_is_bad_input(small_scene, tmp_path):
     """Outputs into a path that is a file (or cannot be created) raise SceneError naming `out`, not an OSError."""
     blocker = tmp_path / "file"

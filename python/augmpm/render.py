@@ -222,7 +222,7 @@ class _BandPng:
         return _png(self.width, self.height, b"".join(parts))
 
 
-def _lower_priority() -> None:
+def lower_priority() -> None:
     """Lowers the calling thread's CPU priority to nice ``_WRITER_NICE``; processes it starts inherit it."""
     # Linux only: there the nice value is per thread and PRIO_PROCESS with a thread id sets just that thread's.
     # Elsewhere the same call would take the id for a process's and renice the whole program, or another one.
@@ -287,7 +287,7 @@ class FrameRenderer:
         reach = np.maximum(np.abs(dr) - 0.5, 0) ** 2 + np.maximum(np.abs(dc) - 0.5, 0) ** 2 <= DOT_RADIUS_PX**2
         self._dr, self._dc = dr[reach], dc[reach]
         self._png = _BandPng(self.background)
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="augmpm-frames", initializer=_lower_priority)
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="augmpm-frames", initializer=lower_priority)
         self._pending: deque[Future] = deque()
         self._animation = None
         self._animation_frames = 0

@@ -28,7 +28,7 @@ import re
 import sys
 import time as wallclock
 from collections import deque
-from concurrent.futures import Future
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -36,7 +36,7 @@ import numpy as np
 
 from augmpm import _core
 from augmpm.files import npz_bytes, output_dir, remove_stale_temporaries, write_bytes, write_npz, write_text
-from augmpm.render import FrameRenderer, write_animation
+from augmpm.render import FrameRenderer, lower_priority, write_animation
 from augmpm.scene import Scene, Scene3, _plain_error, scene_class
 from augmpm.simulation import Method, Simulation
 from augmpm.vtk import write_outlines_vtp, write_pvd, write_vtp
@@ -201,6 +201,11 @@ def resume_run(
     return run.go(raise_on_failure)
 
 
+#: Frames whose files may still be waiting to be written before the run waits for the oldest (fewer than
+#: the PNG writer's 8: a killed run never leaves more than 8 frames ahead of its metrics rows).
+MAX_PENDING_FRAMES = 6
+
+
 class _Run:
     """The loop of a run and its outputs."""
 
@@ -220,8 +225,11 @@ class _Run:
         self.meta["checkpoint_every"] = checkpoint_every
         self.every, self.progress = checkpoint_every, progress
         self.rows, self.done, self.frame, self.resumed = rows, done, frame, resumed
-        # Rows of frames whose PNG is still being written, with its future: committed once it is.
-        self.pending: deque[tuple[dict, Future | None]] = deque()
+        # Rows of frames whose files or PNG are still being written, with their futures: committed once
+        # they are.
+        self.pending: deque[tuple[dict, list[Future]]] = deque()
+        # The frames' files are written on a thread of their own, in order, while the simulation steps.
+        self.files: ThreadPoolExecutor | None = None
         self.total = int(meta["total_steps"])
         self.vtk_frames = [(float(r["time"]), f"vtk/frame_{i:05d}.vtp") for i, r in enumerate(rows)]
         # The walls of each frame (vtk/walls/, indexed by walls.pvd) when some move; still ones once
@@ -264,8 +272,11 @@ class _Run:
         label = f"{scene.name or 'run'} ({sim.method})"
         bar = _progress(self.total, self.progress, initial=self.done, label=label)
         interval = scene.time.output_interval
-        # The renderer is closed also on an interrupt, so that the frames drawn so far make a playable animation.
-        with contextlib.closing(renderer) if renderer is not None else contextlib.nullcontext():
+        # The renderer is closed also on an interrupt, so that the frames drawn so far make a playable animation;
+        # the files' thread finishes what it was given.
+        files = ThreadPoolExecutor(max_workers=1, thread_name_prefix="augmpm-files", initializer=lower_priority)
+        self.files = files
+        with files, contextlib.closing(renderer) if renderer is not None else contextlib.nullcontext():
             if not self.resumed:
                 self.output()
             while self.done < self.total:
@@ -280,6 +291,7 @@ class _Run:
                 self.output()
                 bar.update(n)
         bar.close()
+        self.files = None
         self.commit(wait=True)
         if renderer is not None and animation and self.resumed:
             frames = sorted((out / "frames").glob("frame_*.png"), key=lambda f: int(_FRAME.match(f.name).group(1)))
@@ -297,15 +309,17 @@ class _Run:
             raise failure
         return result
 
-    def _write_walls(self, path: Path, surface: np.ndarray | None = None) -> None:
-        """The walls where they are now: 2D outlines as polylines; in 3D, the walls' surface points half a
-        cell apart (`surface`, if already taken) as vertices."""
+    def _walls_now(self, surface: np.ndarray | None = None) -> tuple[int, object]:
+        """The walls where they are now, to write with :func:`_write_walls`: 2D outlines; in 3D, the walls'
+        surface points half a cell apart (`surface`, if already taken)."""
         sim = self.sim
         if sim.dim == 3:
-            points = sim.wall_points(0.5 * sim.cell_size) if surface is None else surface
-            write_vtp(path, points, {})
-        else:
-            write_outlines_vtp(path, [o for o, _ in sim.wall_outlines()])
+            return 3, sim.wall_points(0.5 * sim.cell_size) if surface is None else surface
+        return 2, [o for o, _ in sim.wall_outlines()]
+
+    def _write_walls(self, path: Path, surface: np.ndarray | None = None) -> None:
+        """Writes the walls where they are now (:meth:`_walls_now`)."""
+        _write_walls(path, self._walls_now(surface))
 
     def output(self) -> None:
         """Writes frame ``self.frame``: its files, then its row of ``metrics.csv``, then a checkpoint if due."""
@@ -315,21 +329,21 @@ class _Run:
         arrays = {"x": x, "v": v, "body": body, "time": sim.time, "step": sim.steps_done}
         if self.bodies:
             arrays["rigid_bodies"] = sim.rigid_bodies
-        write_npz(out / "particles" / f"{name}.npz", arrays)
-        write_vtp(out / "vtk" / f"{name}.vtp", x, {"velocity": v, "body": body})
         self.vtk_frames.append((sim.time, f"vtk/{name}.vtp"))
-        write_pvd(out / "particles.pvd", self.vtk_frames)
         surface = sim.wall_points(0.5 * sim.cell_size) if self.walls_move_3d else None
+        walls = None
         if self.walls:
-            self._write_walls(out / "vtk" / "walls" / f"{name}.vtp", surface)
+            walls = self._walls_now(surface)
             self.wall_frames.append((sim.time, f"vtk/walls/{name}.vtp"))
-            write_pvd(out / "walls.pvd", self.wall_frames)
-        png = None
+        # What the files hold is taken now; the thread writes them while the simulation goes on.
+        frame_files = [
+            self._submit(_write_frame, out, name, arrays, list(self.vtk_frames), walls, list(self.wall_frames))
+        ]
         if self.renderer is not None:
             moving = [outline for outline, moves in sim.wall_outlines() if moves]
             if surface is not None:
                 moving = [surface]
-            png = self.renderer.draw(x, body, sim.time, out / "frames" / f"{name}.png", walls=moving)
+            frame_files.append(self.renderer.draw(x, body, sim.time, out / "frames" / f"{name}.png", walls=moving))
         m = sim.metrics()
         row = {k: m[k] for k in METRIC_COLUMNS}
         impulse, (last, since) = sim.wall_impulse, self.impulse_at
@@ -339,7 +353,12 @@ class _Run:
         if self.bodies:
             row |= self._body_columns(force)
         self.impulse_at = (impulse, sim.time)
-        self.pending.append((row, png))
+        self.pending.append((row, frame_files))
+        # Never more than a few frames behind: their arrays wait in memory until written.
+        while len(self.pending) > MAX_PENDING_FRAMES:
+            for f in self.pending[0][1]:
+                f.result()
+            self.commit()
         checkpoint = self.every and self.frame % self.every == 0
         # A checkpoint must not be ahead of the rows (and PNGs) it implies.
         self.commit(wait=bool(checkpoint))
@@ -358,26 +377,42 @@ class _Run:
         return row
 
     def commit(self, wait: bool = False, rewrite: bool = False) -> None:
-        """Writes ``metrics.csv`` with the rows of every frame whose files are all written (waiting
-        for the PNGs being drawn if ``wait``); ``rewrite`` writes it even if no row is new."""
-        committed = False
-        while self.pending and (wait or self.pending[0][1] is None or self.pending[0][1].done()):
-            row, png = self.pending.popleft()
-            if png is not None:
-                png.result()
-            self.rows.append(row)
-            committed = True
-        if committed or rewrite or not (self.out / "metrics.csv").exists():
+        """Writes ``metrics.csv`` with the rows of every frame whose files are all written (with ``wait``,
+        waiting for the files and PNGs still being written, and for ``metrics.csv`` itself); ``rewrite``
+        writes it even if no row is new. It is written on the files' thread after the frames' files."""
+        committed, failed = False, False
+        try:
+            while self.pending and (wait or all(f.done() for f in self.pending[0][1])):
+                row, futures = self.pending[0]
+                for f in futures:
+                    f.result()
+                self.pending.popleft()
+                self.rows.append(row)
+                committed = True
+        except BaseException:
+            # The frames before the one that failed are complete: their rows are written all the same.
+            failed = True
+            raise
+        finally:
+            self._write_metrics(committed or rewrite, wait or failed)
+
+    def _write_metrics(self, new_rows: bool, wait: bool) -> None:
+        """Writes ``metrics.csv`` (and ``bodies.csv``) with the committed rows if ``new_rows`` or if it is
+        missing, on the files' thread; with ``wait``, waits until it is written."""
+        if new_rows or not (self.out / "metrics.csv").exists():
             buf = io.StringIO()
             writer = csv.DictWriter(buf, fieldnames=self.columns, lineterminator="\r\n")
             writer.writeheader()
             writer.writerows(self.rows)
-            write_text(self.out / "metrics.csv", buf.getvalue())
+            written = [self._submit(write_text, self.out / "metrics.csv", buf.getvalue())]
             if self.bodies:
-                self._write_bodies()
+                written.append(self._submit(write_text, self.out / "bodies.csv", self._bodies_csv()))
+            if wait:
+                for f in written:
+                    f.result()
 
-    def _write_bodies(self) -> None:
-        """``bodies.csv``: the rigid bodies' columns of the committed rows, one row per frame and body."""
+    def _bodies_csv(self) -> str:
+        """The text of ``bodies.csv``: the rigid bodies' columns of the committed rows, one row per frame and body."""
         buf = io.StringIO()
         columns = body_columns(self.sim.dim)
         writer = csv.DictWriter(buf, fieldnames=["frame", "step", "time", "body", *columns], lineterminator="\r\n")
@@ -386,7 +421,41 @@ class _Run:
             for k in range(self.bodies):
                 state = {c: row[f"rigid_{k}_{c}"] for c in columns}
                 writer.writerow({"frame": frame, "step": row["step"], "time": row["time"], "body": k, **state})
-        write_text(self.out / "bodies.csv", buf.getvalue())
+        return buf.getvalue()
+
+    def _submit(self, fn, *args) -> Future:
+        """``fn(*args)`` on the files' thread (at once outside a run's loop)."""
+        if self.files is None:
+            done: Future = Future()
+            done.set_result(fn(*args))
+            return done
+        return self.files.submit(fn, *args)
+
+
+def _write_walls(path: Path, walls: tuple[int, object]) -> None:
+    """The walls of :meth:`_Run._walls_now`: 2D outlines as polylines, 3D surface points as vertices."""
+    dim, data = walls
+    if dim == 3:
+        write_vtp(path, data, {})
+    else:
+        write_outlines_vtp(path, data)
+
+
+def _write_frame(
+    out: Path,
+    name: str,
+    arrays: dict,
+    vtk_frames: list[tuple[float, str]],
+    walls: tuple[int, object] | None,
+    wall_frames: list[tuple[float, str]],
+) -> None:
+    """A frame's files: the particles' npz and VTK, the VTK collection up to it, and where walls move, theirs."""
+    write_npz(out / "particles" / f"{name}.npz", arrays)
+    write_vtp(out / "vtk" / f"{name}.vtp", arrays["x"], {"velocity": arrays["v"], "body": arrays["body"]})
+    write_pvd(out / "particles.pvd", vtk_frames)
+    if walls is not None:
+        _write_walls(out / "vtk" / "walls" / f"{name}.vtp", walls)
+        write_pvd(out / "walls.pvd", wall_frames)
 
 
 def save_checkpoint(path: Path, sim: Simulation, meta: dict) -> None:
