@@ -106,6 +106,70 @@ def test_a_frame_that_cannot_be_written_stops_the_run_with_its_rows_complete(sma
     assert all((out / "vtk" / f"frame_{k:05d}.vtp").is_file() for k in range(3))
 
 
+def test_a_checkpoint_is_never_ahead_of_the_rows_on_disk(small_scene, tmp_path, monkeypatch):
+    """``metrics.csv`` is written on the files' thread. Slowed there (a frame's files and the later
+    ``metrics.csv`` writes take 0.3 s) until the run catches up on its backlog of frames and commits the
+    checkpoint's frame before the checkpoint is due, every checkpoint is still saved only once the rows up to
+    its frame are on disk, so a run killed just after it can resume."""
+    import time
+
+    import augmpm.run
+
+    small_scene["time"].update(steps=100, output_interval=10)
+    run = augmpm.run
+    write_frame, write_text, commit = run._write_frame, run.write_text, run._Run.commit
+    save_checkpoint = run.save_checkpoint
+    seen = []
+
+    def slow_frame(out, name, *args):
+        if name == "frame_00001":
+            time.sleep(0.3)
+        return write_frame(out, name, *args)
+
+    def slow_text(path, text, *args, **kwargs):
+        if path.name == "metrics.csv" and text.count("\n") > 2:
+            time.sleep(0.3)
+        return write_text(path, text, *args, **kwargs)
+
+    def late_commit(self, wait=False, rewrite=False):
+        if not wait and len(self.pending) > run.MAX_PENDING_FRAMES:
+            time.sleep(0.1)
+        return commit(self, wait, rewrite)
+
+    def checked(path, sim, meta):
+        with open(path.parent / "metrics.csv", newline="") as fh:
+            seen.append((meta["frame"], len(list(csv.DictReader(fh)))))
+        return save_checkpoint(path, sim, meta)
+
+    monkeypatch.setattr(run, "_write_frame", slow_frame)
+    monkeypatch.setattr(run, "write_text", slow_text)
+    monkeypatch.setattr(run._Run, "commit", late_commit)
+    monkeypatch.setattr(run, "save_checkpoint", checked)
+    checkpoint_every = run.MAX_PENDING_FRAMES + 1
+    augmpm.run_scene(augmpm.Scene.from_dict(small_scene), tmp_path / "run", progress=False, render=False,
+                     checkpoint_every=checkpoint_every)  # fmt: skip
+    assert seen and all(rows >= frame + 1 for frame, rows in seen), seen
+
+
+def test_a_metrics_file_that_cannot_be_written_stops_the_run(small_scene, tmp_path, monkeypatch):
+    """A ``metrics.csv`` write that fails on the files' thread (the third) stops the run with its error."""
+    import augmpm.run
+
+    small_scene["time"].update(steps=200, output_interval=10)
+    write_text, calls = augmpm.run.write_text, []
+
+    def failing(path, text, *args, **kwargs):
+        if path.name == "metrics.csv":
+            calls.append(path)
+            if len(calls) == 3:
+                raise OSError(28, "No space left on device")
+        return write_text(path, text, *args, **kwargs)
+
+    monkeypatch.setattr(augmpm.run, "write_text", failing)
+    with pytest.raises(OSError, match="No space left"):
+        augmpm.run_scene(augmpm.Scene.from_dict(small_scene), tmp_path / "run", progress=False, render=False)
+
+
 def test_an_output_path_that_is_a_file_is_bad_input(small_scene, tmp_path):
     """Outputs into a path that is a file (or cannot be created) raise SceneError naming `out`, not an OSError."""
     blocker = tmp_path / "file"

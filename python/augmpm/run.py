@@ -201,9 +201,10 @@ def resume_run(
     return run.go(raise_on_failure)
 
 
-#: Frames whose files may still be waiting to be written before the run waits for the oldest (fewer than
-#: the PNG writer's 8: a killed run never leaves more than 8 frames ahead of its metrics rows).
-MAX_PENDING_FRAMES = 6
+#: Frames whose files may still be waiting to be written before the run waits for the oldest. A frame's row
+#: reaches the disk after the files of the frames queued before it, so a killed run leaves at most
+#: 2 × 3 + 1 = 7 frames (files or PNGs) ahead of the rows in its metrics.csv: fewer than the 8 promised.
+MAX_PENDING_FRAMES = 3
 
 
 class _Run:
@@ -230,6 +231,8 @@ class _Run:
         self.pending: deque[tuple[dict, list[Future]]] = deque()
         # The frames' files are written on a thread of their own, in order, while the simulation steps.
         self.files: ThreadPoolExecutor | None = None
+        # The writes of metrics.csv and bodies.csv queued on it and not yet checked.
+        self.metrics_writes: list[Future] = []
         self.total = int(meta["total_steps"])
         self.vtk_frames = [(float(r["time"]), f"vtk/frame_{i:05d}.vtp") for i, r in enumerate(rows)]
         # The walls of each frame (vtk/walls/, indexed by walls.pvd) when some move; still ones once
@@ -398,18 +401,24 @@ class _Run:
 
     def _write_metrics(self, new_rows: bool, wait: bool) -> None:
         """Writes ``metrics.csv`` (and ``bodies.csv``) with the committed rows if ``new_rows`` or if it is
-        missing, on the files' thread; with ``wait``, waits until it is written."""
+        missing, on the files' thread; with ``wait``, waits until it and every write queued before it are done.
+        A write found failed raises its error."""
         if new_rows or not (self.out / "metrics.csv").exists():
             buf = io.StringIO()
             writer = csv.DictWriter(buf, fieldnames=self.columns, lineterminator="\r\n")
             writer.writeheader()
             writer.writerows(self.rows)
-            written = [self._submit(write_text, self.out / "metrics.csv", buf.getvalue())]
+            self.metrics_writes.append(self._submit(write_text, self.out / "metrics.csv", buf.getvalue()))
             if self.bodies:
-                written.append(self._submit(write_text, self.out / "bodies.csv", self._bodies_csv()))
-            if wait:
-                for f in written:
-                    f.result()
+                self.metrics_writes.append(self._submit(write_text, self.out / "bodies.csv", self._bodies_csv()))
+        if wait:
+            # Everything queued before this point is written once the no-op behind it has run (one worker, in
+            # order): rows committed earlier without waiting included.
+            self._submit(lambda: None).result()
+        # A write that failed stops the run; the finished ones are checked and let go.
+        for f in [f for f in self.metrics_writes if f.done()]:
+            self.metrics_writes.remove(f)
+            f.result()
 
     def _bodies_csv(self) -> str:
         """The text of ``bodies.csv``: the rigid bodies' columns of the committed rows, one row per frame and body."""
