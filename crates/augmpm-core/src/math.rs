@@ -260,6 +260,16 @@ mod tests {
     use super::*;
     use nalgebra::{Matrix2, Matrix3};
 
+    /// Numbers in [−0.5, 0.5) from `seed` (xorshift64).
+    fn uniform(mut s: u64) -> impl FnMut() -> f64 {
+        move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        }
+    }
+
     /// The rotation-variant SVD reconstructs the matrix and returns proper rotations.
     #[test]
     fn svd_reconstructs_with_rotations() {
@@ -297,13 +307,7 @@ mod tests {
     /// eigenvalues meet (diag(1, 1, 3) turned; its smallest is 1).
     #[test]
     fn closed_form_smallest_eigenvalue_in_3d() {
-        let mut s = 0x2545f4914f6cdd1du64;
-        let mut next = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut next = uniform(0x2545f4914f6cdd1du64);
         for _ in 0..1000 {
             let g = Matrix3::from_fn(|_, _| next());
             let m = g * g.transpose() + Matrix3::from_fn(|_, _| 0.1 * next()).symmetric_part();
@@ -321,13 +325,7 @@ mod tests {
     /// do, on random symmetric matrices with floors on both sides of it (but within 1e-9 of it).
     #[test]
     fn at_least_agrees_with_the_smallest_eigenvalue() {
-        let mut s = 0x9e3779b97f4a7c15u64;
-        let mut next = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut next = uniform(0x9e3779b97f4a7c15u64);
         for _ in 0..2000 {
             let g = Matrix3::from_fn(|_, _| next());
             let m = (g * g.transpose() + Matrix3::from_fn(|_, _| 0.3 * next())).symmetric_part();
@@ -360,13 +358,7 @@ mod tests {
             assert!((kept.symmetric_part() - c.symmetric_part()).norm() < 1e-13);
             assert!((keep_spin(&kept, to, from) - c).norm() < 1e-12 * (1.0 + c.norm()));
         }
-        let mut s = 0x2545f4914f6cdd1du64;
-        let mut next = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut next = uniform(0x2545f4914f6cdd1du64);
         for _ in 0..200 {
             let c3 = Matrix3::from_fn(|_, _| next());
             let (g, k) = (Matrix3::from_fn(|_, _| next()), Matrix3::from_fn(|_, _| next()));
