@@ -246,12 +246,11 @@ impl<const D: usize> State<D> {
     /// Δv Δt each step, and the particles at its surface would end the step inside it. A body at rest, or
     /// moving steadily, is seen as it moves. Its state keeps its own velocities.
     pub fn seen_poses(&self, bodies: &[RigidBody<D>]) -> std::borrow::Cow<'_, [(usize, WallPose<D>)]> {
-        let state = self;
-        if state.body_kicks.iter().all(|(v, w)| v.iter().chain(w.iter()).all(|&a| a == 0.0)) {
-            return std::borrow::Cow::Borrowed(&state.wall_poses);
+        if self.body_kicks.iter().all(|(v, w)| v.iter().chain(w.iter()).all(|&a| a == 0.0)) {
+            return std::borrow::Cow::Borrowed(&self.wall_poses);
         }
-        let mut poses = state.wall_poses.clone();
-        for (body, (dv, dw)) in bodies.iter().zip(&state.body_kicks) {
+        let mut poses = self.wall_poses.clone();
+        for (body, (dv, dw)) in bodies.iter().zip(&self.body_kicks) {
             let i = poses.binary_search_by_key(&body.wall, |&(w, _)| w).expect("a body's wall is posed");
             let pose = &mut poses[i].1;
             pose.velocity = (Vector::<D>::from(pose.velocity) + dv).into();
