@@ -123,6 +123,27 @@ def test_restore_names_the_entry_that_does_not_fit(small_scene):
     np.testing.assert_array_equal(sim.positions, before)
 
 
+def test_a_fluid_checkpoint_holds_the_identity_for_f(small_scene):
+    """A fluid keeps no deformation gradient: its checkpoint gives F = I for every particle, restores, and a
+    state whose F is not the identity is refused (the engine would drop it)."""
+    for body in small_scene["bodies"]:
+        body["material"] = {"type": "fluid", "density": 1000.0, "stiffness": 1e4, "viscosity": 1.0}
+    sim = augmpm.Simulation(augmpm.Scene.from_dict(small_scene), threads=1)
+    sim.step(5)
+    good = sim.checkpoint()
+    n = sim.num_particles
+    np.testing.assert_array_equal(good["f"], np.broadcast_to(np.eye(2), (n, 2, 2)))
+    fields = {f["name"]: f["optional"] for f in augmpm._core.state_fields()}
+    assert fields["f"] and not fields["x"]
+    sheared = good["f"].copy()
+    sheared[2, 0, 1] = 0.25
+    with pytest.raises(augmpm.SceneError, match="f of particle 2 is not the identity") as err:
+        sim.restore({**good, "f": sheared})
+    assert err.value.key == "state"
+    sim.restore(good)
+    sim.step(1)
+
+
 def test_a_failed_simulation_stays_failed_until_restored(small_scene):
     """After a blow-up (dt 9× the stable step) every step raises the same SimulationError; a restored state runs on."""
     small_scene["time"]["dt"] = 0.05

@@ -20,7 +20,8 @@ def scene3_schema() -> str:
     """The JSON Schema of 3D scene files: the keys of scene_schema() with three-component vectors."""
 
 def state_fields() -> list[dict[str, Any]]:
-    """The per-particle arrays of a checkpoint: name, dtype, shape after the particle axis, unit, doc."""
+    """The per-particle arrays of a checkpoint: name, dtype, shape after the particle axis, unit, doc, and
+    optional (the engine may hold none, the checkpoint then giving every particle its rest value)."""
 
 class Error(Exception):
     """Base class of every augmpm error."""

@@ -44,6 +44,9 @@ pub struct Field {
     /// SI unit, "1" when dimensionless, "" for an index.
     pub unit: &'static str,
     pub doc: &'static str,
+    /// Whether the column may be empty, standing for every particle at its kind's rest value
+    /// ([`Column::to_f64_rows`]): kept only where a material reads it.
+    pub optional: bool,
 }
 
 /// A field's values, read-only (the variant is the field's [`FieldKind`]).
@@ -111,6 +114,22 @@ impl<'a, const D: usize> Column<'a, D> {
         }
     }
 
+    /// The reals of the column for `n` particles, as [`Column::to_f64`] gives them; an empty column
+    /// stands for every particle at its kind's rest value (a matrix I, a vector 0, a real 1).
+    pub fn to_f64_rows(&self, n: usize) -> Option<Vec<f64>> {
+        if !self.is_empty() || n == 0 {
+            return self.to_f64();
+        }
+        Some(match self {
+            Column::Vector(_) => vec![0.0; n * D],
+            Column::Matrix(_) => {
+                (0..n).flat_map(|_| (0..D * D).map(|k| if k / D == k % D { 1.0 } else { 0.0 })).collect()
+            }
+            Column::Real(_) => vec![1.0; n],
+            Column::Index(_) => return None,
+        })
+    }
+
     /// The reals of the column, widened to f64, particle by particle (matrices row by row);
     /// `None` for an index column.
     #[allow(clippy::useless_conversion)] // `Real` is f64 here, f32 in augmpm-core-f32
@@ -160,7 +179,7 @@ macro_rules! per_particle {
     (
         $(#[$meta:meta])*
         pub struct $name:ident {
-            $( $(#[doc = $doc:literal])* $field:ident : $kind:ident [$unit:literal], )*
+            $( $(#[doc = $doc:literal])* $field:ident : $kind:ident [$unit:literal $(, $optional:ident)?], )*
         }
     ) => {
         $(#[$meta])*
@@ -176,6 +195,7 @@ macro_rules! per_particle {
                     kind: $crate::particles::FieldKind::$kind,
                     unit: $unit,
                     doc: concat!($($doc),*),
+                    optional: $crate::per_particle!(@optional $($optional)?),
                 }, )*
             ];
 
@@ -190,6 +210,8 @@ macro_rules! per_particle {
             }
         }
     };
+    (@optional optional) => { true };
+    (@optional) => { false };
     (@type Vector) => { $crate::math::Vector<D> };
     (@type Matrix) => { $crate::math::Matrix<D> };
     (@type Real) => { $crate::math::Real };
@@ -210,8 +232,9 @@ per_particle! {
         /// the velocity over the particle's own grid points (`WallEntry::affine_velocity`), so the spin is
         /// kept as the particle moves. The strain rate (its symmetric part) is the fit's.
         c: Matrix["1/s"],
-        /// Elastic deformation gradient F.
-        f: Matrix["1"],
+        /// Elastic deformation gradient F; empty when no material of the model keeps one (fluids do not),
+        /// every particle then at F = I.
+        f: Matrix["1", optional],
         /// Plastic volume ratio J_p (fluids: the volume ratio J).
         jp: Real["1"],
         /// Mass (per unit length in 2D).
@@ -230,9 +253,9 @@ pub fn heap_bytes<const D: usize>(columns: &[Column<'_, D>]) -> usize {
     columns.iter().map(Column::heap_bytes).sum()
 }
 
-/// The first column whose length is not `n`, as a message naming its field.
+/// The first column whose length is not `n` (nor 0 for an optional field), as a message naming its field.
 pub fn check_lengths<const D: usize>(columns: &[Column<'_, D>], fields: &[Field], n: usize) -> Result<(), String> {
-    match columns.iter().zip(fields).find(|(c, _)| c.len() != n) {
+    match columns.iter().zip(fields).find(|(c, f)| c.len() != n && !(f.optional && c.is_empty())) {
         Some((c, f)) => Err(format!("{} has {} entries for {n} particles", f.name, c.len())),
         None => Ok(()),
     }
@@ -260,12 +283,18 @@ impl<const D: usize> Particles<D> {
         self.material.push(material);
     }
 
+    /// Particle `p`'s deformation gradient: I where the model keeps none.
+    #[inline]
+    pub fn deformation_gradient(&self, p: usize) -> Matrix<D> {
+        self.f.get(p).copied().unwrap_or_else(Matrix::<D>::identity)
+    }
+
     /// Heap bytes of the particle arrays.
     pub fn heap_bytes(&self) -> usize {
         heap_bytes(&self.columns())
     }
 
-    /// Bytes per particle of the arrays, in D dimensions.
+    /// Bytes per particle of the arrays, in D dimensions, with every optional column kept.
     pub fn bytes_per_particle() -> usize {
         Self::FIELDS.iter().map(|f| f.kind.bytes(D)).sum()
     }

@@ -6,7 +6,7 @@ use crate::contact::Contacts;
 use crate::geometry::Region;
 use crate::grid::{GridLayout, GridState, OutOfGrid};
 use crate::material::{ConstitutiveModel, Material};
-use crate::math::{Dim, DimOps, Real, Vector};
+use crate::math::{Dim, DimOps, Matrix, Real, Vector};
 use crate::motion::WallPose;
 use crate::parallel::Disjoint;
 use crate::particles::{Column, ColumnMut, Field, FieldKind, Particles};
@@ -50,6 +50,12 @@ where
 
     fn smooths_volume_ratio(&self) -> bool {
         self.materials.iter().any(ConstitutiveModel::<D>::smooths_volume_ratio)
+    }
+
+    /// Whether a material of the model keeps a deformation gradient; without one the particles keep
+    /// no F (`Particles::f`).
+    pub fn keeps_deformation_gradient(&self) -> bool {
+        self.materials.iter().any(ConstitutiveModel::<D>::keeps_deformation_gradient)
     }
 
     /// Puts moving walls where they are at time `t` (s), moving over the step that starts there (the
@@ -172,8 +178,9 @@ const STEP_FIELDS: [Field; 2] = [
         kind: FieldKind::Real,
         unit: "kg/m³",
         doc: "Density in the last step, as the particle's material saw it (per unit area in 2D).",
+        optional: false,
     },
-    Field { name: "bins", kind: FieldKind::Index, unit: "", doc: "Block the particle was binned in." },
+    Field { name: "bins", kind: FieldKind::Index, unit: "", doc: "Block the particle was binned in.", optional: false },
 ];
 
 /// A number of a [`State`], to read or to replace.
@@ -269,7 +276,7 @@ impl<const D: usize> State<D> {
         self.max_cfl = cells;
     }
 
-    /// Bytes per particle of the state in D dimensions.
+    /// Bytes per particle of the state in D dimensions, with every optional column kept (at most).
     pub fn bytes_per_particle() -> usize {
         Self::fields().map(|f| f.kind.bytes(D)).sum()
     }
@@ -521,6 +528,10 @@ where
         if model.region.moves() {
             model.follow_walls(0.0, &[]);
         }
+        let mut particles = particles;
+        if !model.keeps_deformation_gradient() {
+            particles.f = Vec::new();
+        }
         let mut state = State::new(particles);
         state.wall_impulse = vec![Vector::<D>::zeros(); model.boundary.contacts().len()];
         state.wall_angular_impulse = vec![Vector::<3>::zeros(); model.boundary.contacts().len()];
@@ -632,6 +643,18 @@ where
         if let Some(i) = p.body.iter().position(|&b| b as usize >= bodies) {
             return Err(format!("particle {i}: body {} of {bodies}", p.body[i]));
         }
+        let keeps_f = self.model.keeps_deformation_gradient();
+        if keeps_f && p.f.len() != p.len() {
+            return Err(format!(
+                "f has {} entries for {} particles; a material of this scene keeps F",
+                p.f.len(),
+                p.len()
+            ));
+        }
+        // A model without F drops the checkpoint's; every particle must then be at F = I, as it kept it.
+        if let Some(i) = p.f.iter().position(|f| *f != Matrix::<D>::identity()).filter(|_| !keeps_f) {
+            return Err(format!("f of particle {i} is not the identity; no material of this scene keeps F"));
+        }
         // Every check before anything changes (the schedule's restore is the first change).
         let walls = self.model.boundary.contacts().len();
         if !state.wall_impulse.is_empty() && state.wall_impulse.len() != walls {
@@ -671,6 +694,9 @@ where
             None => run(&mut self.scratch.schedule),
         }?;
         let mut state = state;
+        if !keeps_f {
+            state.particles.f = Vec::new();
+        }
         if state.wall_impulse.is_empty() {
             // A checkpoint written before walls' impulses were kept: none counted so far.
             state.wall_impulse = vec![Vector::<D>::zeros(); walls];

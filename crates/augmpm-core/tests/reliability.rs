@@ -105,6 +105,45 @@ fn restore_refuses_a_state_that_does_not_fit() {
     assert!(sim.state() == good, "a refused state changed the simulation");
 }
 
+/// A fluid keeps no deformation gradient (it never reads one): a scene of fluids holds no F, saving
+/// D² reals a particle, reads F = I for every particle, and restores only a state at F = I; a scene with
+/// a solid keeps F for every particle and refuses a state without it.
+#[test]
+fn only_a_material_with_a_deformation_gradient_keeps_one() {
+    let mut fluid = build(DROP, Method::Naive);
+    fluid.advance(10).unwrap();
+    let n = fluid.particles().len();
+    assert!(n > 0 && fluid.particles().f.is_empty());
+    assert_eq!(fluid.particles().deformation_gradient(n - 1), nalgebra::Matrix2::identity());
+    let saved = fluid.state();
+
+    // A state that holds F = I (an older checkpoint) restores, and the F is dropped.
+    let mut with_f = saved.clone();
+    with_f.particles.f = vec![nalgebra::Matrix2::identity(); n];
+    let mut restored = build(DROP, Method::Naive);
+    restored.restore(with_f.clone()).unwrap();
+    assert!(restored.state() == saved, "a state holding F = I restored differently");
+    with_f.particles.f[3][(0, 1)] = 0.5;
+    let err = restored.restore(with_f).unwrap_err();
+    assert!(err.contains("f of particle 3 is not the identity"), "{err}");
+
+    let solid = DROP.replace(
+        r#""type": "fluid", "density": 1000.0, "stiffness": 1e4, "viscosity": 1.0"#,
+        r#""type": "elastic", "density": 1000.0, "youngs_modulus": 1e5, "poisson_ratio": 0.3"#,
+    );
+    let mut elastic = build(&solid, Method::Naive);
+    elastic.advance(10).unwrap();
+    assert_eq!(elastic.particles().f.len(), elastic.particles().len());
+    assert!(elastic.particles().f.iter().any(|f| *f != nalgebra::Matrix2::identity()), "the solid deforms");
+    // The same particles (the seeding does not depend on the material), 4 reals a particle fewer.
+    assert_eq!(elastic.particles().len(), n);
+    assert_eq!(saved.heap_bytes() + n * 4 * std::mem::size_of::<f64>(), elastic.state().heap_bytes());
+    let mut without = elastic.state();
+    without.particles.f.clear();
+    let err = elastic.restore(without).unwrap_err();
+    assert!(err.contains("f has 0 entries") && err.contains("keeps F"), "{err}");
+}
+
 /// A time step far above the stable bound blows the state up: the step names the particle and
 /// the likely cause, and the failed simulation refuses to go on with the same error.
 #[test]

@@ -8,7 +8,8 @@
 //! (written before they were kept) has no impulse counted and no posed wall. `body_kick` (float64,
 //! (rigid bodies, D + 3)): per rigid body, the velocity change (m/s) and angular velocity change (rad/s;
 //! 3 components, in 2D only z) the material sees it take ahead in the next step (`State::body_kicks`); a
-//! checkpoint without it predicts none.
+//! checkpoint without it predicts none. `f` of a scene whose materials keep no deformation gradient (fluids
+//! only: the engine then holds none) is every particle's identity, and restoring one checks that it is.
 
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -28,6 +29,7 @@ pub fn state_fields(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
             d.set_item("shape", f.kind.shape(2))?;
             d.set_item("unit", f.unit)?;
             d.set_item("doc", f.doc)?;
+            d.set_item("optional", f.optional)?;
             Ok(d)
         })
         .collect::<PyResult<Vec<_>>>()?;
@@ -52,7 +54,8 @@ macro_rules! state_conversions {
                 for (field, column) in State::<D>::fields().zip(state.columns()) {
                     let mut shape = vec![n];
                     shape.extend(field.kind.shape(D));
-                    match (&column, column.to_f64()) {
+                    // An optional column the model does not keep reads as every particle at rest (F = I).
+                    match (&column, column.to_f64_rows(n)) {
                         (Column::Index(a), _) => d.set_item(field.name, PyArray1::from_slice(py, a))?,
                         (_, Some(data)) => d.set_item(field.name, PyArray1::from_vec(py, data).reshape(shape)?)?,
                         (_, None) => unreachable!("only index columns have no reals"),

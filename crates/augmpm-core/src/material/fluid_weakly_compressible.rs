@@ -118,6 +118,10 @@ impl<const D: usize> ConstitutiveModel<D> for WeaklyCompressibleFluid {
         }
     }
 
+    fn keeps_deformation_gradient(&self) -> bool {
+        false
+    }
+
     fn needs_grid_density(&self) -> bool {
         self.density_estimate == DensityEstimate::Grid
     }

@@ -50,6 +50,12 @@ pub trait ConstitutiveModel<const D: usize> {
     /// Advances F (and J_p) over one step with velocity gradient `grad_v`.
     fn update_deformation(&self, f: &mut Matrix<D>, jp: &mut Real, grad_v: &Matrix<D>, dt: Real);
 
+    /// Whether the model reads and advances the deformation gradient F. A scene none of whose models
+    /// does keeps no F: every particle reads F = I (`Particles::f`).
+    fn keeps_deformation_gradient(&self) -> bool {
+        true
+    }
+
     /// Whether [`MaterialPoint::density`] must be estimated on the grid before the stress.
     fn needs_grid_density(&self) -> bool {
         false
@@ -157,6 +163,9 @@ where
     #[inline]
     fn update_deformation(&self, f: &mut Matrix<D>, jp: &mut Real, grad_v: &Matrix<D>, dt: Real) {
         dispatch!(self, m => m.update_deformation(f, jp, grad_v, dt))
+    }
+    fn keeps_deformation_gradient(&self) -> bool {
+        dispatch!(self, m => ConstitutiveModel::<D>::keeps_deformation_gradient(m))
     }
     fn needs_grid_density(&self) -> bool {
         dispatch!(self, m => ConstitutiveModel::<D>::needs_grid_density(m))

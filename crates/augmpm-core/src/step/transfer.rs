@@ -255,7 +255,7 @@ pub fn p2g<const D: usize>(
                 }
             }
             let point = MaterialPoint {
-                f: particles.f[p],
+                f: particles.deformation_gradient(p),
                 jp,
                 grad_v: particles.c[p],
                 mass: particles.mass[p],
@@ -487,17 +487,18 @@ where
     let (h, inv_h) = (layout.h, 1.0 / layout.h);
     let apic = 4.0 * inv_h * inv_h;
     let Particles { x, v, c, f, jp, material, mass, .. } = particles;
+    // Written at each particle's own index; empty when the model keeps no F.
+    let f = Disjoint::new(f);
     let sum = x
         .par_iter_mut()
         .zip(v.par_iter_mut())
         .zip(c.par_iter_mut())
-        .zip(f.par_iter_mut())
         .zip(jp.par_iter_mut())
         .zip(material.par_iter())
         .zip(mass.par_iter())
         .enumerate()
         .with_min_len(t.schedule.min_len(MIN_TASK))
-        .map(|(p, ((((((xp, vp), cp), fp), jpp), m), &mp))| {
+        .map(|(p, (((((xp, vp), cp), jpp), m), &mp))| {
             let mut vn = Vector::<D>::zeros();
             let mut cn = Matrix::<D>::zeros();
             let mut held = false;
@@ -561,7 +562,16 @@ where
             if let Some(&rho) = density.get(p).filter(|_| material.smooths_volume_ratio()) {
                 *jpp = ConstitutiveModel::<D>::density(material) / rho;
             }
-            material.update_deformation(fp, jpp, &cn, dt);
+            let mut fp = Matrix::<D>::identity();
+            if p < f.len() {
+                // SAFETY: in bounds, and each particle is visited once.
+                unsafe { f.update(p, |fq| fp = *fq) };
+            }
+            material.update_deformation(&mut fp, jpp, &cn, dt);
+            if p < f.len() {
+                // SAFETY: as above.
+                unsafe { f.update(p, |fq| *fq = fp) };
+            }
             // The particle's kinetic energy must be representable too, or the run's energy is garbage.
             let finite = xp.iter().chain(vp.iter()).chain(fp.iter()).all(|a| a.is_finite())
                 && crate::particles::energy_root(mp, vp) < f64::MAX.sqrt();
