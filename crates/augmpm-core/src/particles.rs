@@ -241,10 +241,8 @@ per_particle! {
         mass: Real["kg"],
         /// Initial volume (an area in 2D).
         vol0: Real["m³"],
-        /// Index of the body the particle was seeded in.
+        /// Index of the body the particle was seeded in, and of its material in the model (one a body).
         body: Index[""],
-        /// Index of the particle's material in the model.
-        material: Index[""],
     }
 }
 
@@ -271,7 +269,7 @@ impl<const D: usize> Particles<D> {
     }
 
     /// Adds a particle at rest state (F = I, J_p = 1, ∇v = 0).
-    pub fn push(&mut self, x: Vector<D>, v: Vector<D>, mass: Real, vol0: Real, body: u32, material: u32) {
+    pub fn push(&mut self, x: Vector<D>, v: Vector<D>, mass: Real, vol0: Real, body: u32) {
         self.x.push(x);
         self.v.push(v);
         self.c.push(Matrix::<D>::zeros());
@@ -280,7 +278,6 @@ impl<const D: usize> Particles<D> {
         self.mass.push(mass);
         self.vol0.push(vol0);
         self.body.push(body);
-        self.material.push(material);
     }
 
     /// Particle `p`'s deformation gradient: I where the model keeps none.
@@ -327,14 +324,14 @@ mod tests {
     #[test]
     fn the_table_covers_every_array_and_push_fills_them() {
         let mut p = Particles::<3>::default();
-        p.push(Vector::<3>::zeros(), Vector::<3>::zeros(), 1.0, 1.0, 0, 0);
-        p.push(Vector::<3>::zeros(), Vector::<3>::zeros(), 1.0, 1.0, 0, 0);
+        p.push(Vector::<3>::zeros(), Vector::<3>::zeros(), 1.0, 1.0, 0);
+        p.push(Vector::<3>::zeros(), Vector::<3>::zeros(), 1.0, 1.0, 0);
         assert_eq!(p.columns().len(), Particles::<3>::FIELDS.len());
         check_lengths(&p.columns(), Particles::<3>::FIELDS, 2).unwrap();
         let names: Vec<&str> = Particles::<3>::FIELDS.iter().map(|f| f.name).collect();
-        assert_eq!(names, ["x", "v", "c", "f", "jp", "mass", "vol0", "body", "material"]);
-        // 3D: 3 + 3 + 9 + 9 + 3 reals and 2 indices per particle.
-        assert_eq!(Particles::<3>::bytes_per_particle(), 27 * std::mem::size_of::<Real>() + 8);
+        assert_eq!(names, ["x", "v", "c", "f", "jp", "mass", "vol0", "body"]);
+        // 3D: 3 + 3 + 9 + 9 + 3 reals and 1 index per particle.
+        assert_eq!(Particles::<3>::bytes_per_particle(), 27 * std::mem::size_of::<Real>() + 4);
         assert!(p.heap_bytes() >= 2 * Particles::<3>::bytes_per_particle());
     }
 
@@ -342,7 +339,7 @@ mod tests {
     #[test]
     fn columns_round_trip_through_f64() {
         let mut p = Particles::<2>::default();
-        p.push(Vector::<2>::new(0.25, 0.5), Vector::<2>::new(1.0, -2.0), 3.0, 0.5, 1, 0);
+        p.push(Vector::<2>::new(0.25, 0.5), Vector::<2>::new(1.0, -2.0), 3.0, 0.5, 1);
         p.c[0] = Matrix::<2>::new(1.0, 2.0, 3.0, 4.0);
         assert_eq!(Column::Matrix(&p.c).to_f64().unwrap(), [1.0, 2.0, 3.0, 4.0]);
         let mut q = Particles::<2>::default();

@@ -1112,8 +1112,7 @@ impl Scene {
                 return Err(SceneError::new(key, "body lies outside the walls: nothing is left to fill"));
             }
             for p in (0..seeded.len()).filter(|&p| !(body.fill && outside(p))) {
-                let (pb, pm) = (seeded.body[p], seeded.material[p]);
-                particles.push(seeded.x[p], seeded.v[p], seeded.mass[p], seeded.vol0[p], pb, pm);
+                particles.push(seeded.x[p], seeded.v[p], seeded.mass[p], seeded.vol0[p], seeded.body[p]);
             }
             let energy: f64 = (first..particles.len())
                 .map(|p| crate::particles::energy_root(particles.mass[p], &particles.v[p]).powi(2))
@@ -1311,7 +1310,7 @@ fn seed_body(
     let (mass, vol0) = (area * density / n, area / n);
     let v = point(&body.velocity);
     for p in positions {
-        out.push(p, v, mass, vol0, index as u32, index as u32);
+        out.push(p, v, mass, vol0, index as u32);
     }
     Ok(())
 }

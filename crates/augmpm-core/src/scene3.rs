@@ -1167,7 +1167,7 @@ fn seed_body(
     let (mass, vol0) = (volume * density / n, volume / n);
     let v = p3(&body.velocity);
     for p in positions {
-        out.push(p, v, mass, vol0, index as u32, index as u32);
+        out.push(p, v, mass, vol0, index as u32);
     }
     Ok(())
 }

@@ -371,14 +371,14 @@ impl<const D: usize> Scratch<D> {
         let Self { schedule, volume_ratio, density_mass, smooths, .. } = self;
         if !volume_ratio.is_empty() {
             schedule.clear(layout, schedule.stale(), volume_ratio, (0.0, 0.0));
-            let material = &particles.material;
+            let body = &particles.body;
             transfer::scatter_volume_ratio(
                 layout,
                 schedule,
                 &particles.x,
                 &particles.vol0,
                 &particles.jp,
-                |p| smooths[material[p] as usize],
+                |p| smooths[body[p] as usize],
                 volume_ratio,
             );
         }
@@ -637,9 +637,6 @@ where
         let p = &state.particles;
         // One material per body (see `Scene::build`).
         let bodies = self.model.materials.len();
-        if let Some(i) = p.material.iter().position(|&m| m as usize >= bodies) {
-            return Err(format!("particle {i}: material {} of {bodies}", p.material[i]));
-        }
         if let Some(i) = p.body.iter().position(|&b| b as usize >= bodies) {
             return Err(format!("particle {i}: body {} of {bodies}", p.body[i]));
         }

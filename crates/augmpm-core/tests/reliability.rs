@@ -88,8 +88,8 @@ fn restore_refuses_a_state_that_does_not_fit() {
     s.particles.v.pop();
     refused(&mut sim, s, "v has");
     let mut s = good.clone();
-    s.particles.material[3] = 7;
-    refused(&mut sim, s, "material 7");
+    s.particles.body[3] = 7;
+    refused(&mut sim, s, "body 7");
     let mut s = good.clone();
     s.particles.x[0].x = f64::NAN;
     refused(&mut sim, s, "x of particle 0 is not finite");

@@ -44,7 +44,7 @@ fn particles_near_floor(origin: Point, along: Point, n: usize, depth: Real, seed
     for _ in 0..n {
         let x = origin + along * (0.27 + 0.4 * rnd()) + normal_in * (depth * rnd());
         let v = Vector2::new(rnd() - 0.5, rnd() - 0.5);
-        ps.push(x, v, 0.5 + rnd(), 1.0, 0, 0);
+        ps.push(x, v, 0.5 + rnd(), 1.0, 0);
         let last = ps.len() - 1;
         ps.c[last] = Matrix2::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.5, rnd() - 0.5) * 8.0;
     }
@@ -286,7 +286,7 @@ fn normal_velocity_vanishes_linearly_at_the_wall() {
         let distances = [0.3, 0.03, 0.003, 0.0003];
         let mut ps = Particles::<2>::default();
         for (k, d) in distances.iter().enumerate() {
-            ps.push(origin + along * (0.3 + 0.1 * k as Real) + normal_in * (d * H), Point::zeros(), 1.0, 1.0, 0, 0);
+            ps.push(origin + along * (0.3 + 0.1 * k as Real) + normal_in * (d * H), Point::zeros(), 1.0, 1.0, 0);
         }
         let s = setup(walls, cond, &ps, AugmentedTransfer::Stable);
         let velocity = vec![-normal_in; s.layout.num_nodes() + s.grid.points.len()];
@@ -340,7 +340,7 @@ fn transfer_weights_are_centred_on_the_particle() {
         for (k, d) in depths.iter().enumerate() {
             for j in 0..10 {
                 let x = origin + along * (0.2 + 0.05 * k as Real + 0.0037 * j as Real) + normal_in * (d * H);
-                ps.push(x, Point::zeros(), 1.0, 1.0, 0, 0);
+                ps.push(x, Point::zeros(), 1.0, 1.0, 0);
             }
         }
         let s = setup(walls, WallCondition::Slip, &ps, AugmentedTransfer::Stable);

@@ -119,7 +119,7 @@ fn simulation(material: Material, augmented: bool) -> Simulation<3> {
             for k in 0..count {
                 let x = V3::new(0.4, 0.25, 0.4) + V3::new(i as Real, j as Real, k as Real) * spacing;
                 let volume = spacing.powi(3);
-                particles.push(x, V3::zeros(), density * volume, volume, 0, 0);
+                particles.push(x, V3::zeros(), density * volume, volume, 0);
             }
         }
     }
@@ -225,7 +225,7 @@ fn water_in_a_tilted_box_stays_inside_with_the_augmented_grid() {
                 for l in 0..24 {
                     let x = centre + (V3::new(i as Real, j as Real, l as Real) - V3::repeat(11.5)) * spacing;
                     if (x - centre).norm() < 0.15 {
-                        particles.push(x, V3::zeros(), 1000.0 * spacing.powi(3), spacing.powi(3), 0, 0);
+                        particles.push(x, V3::zeros(), 1000.0 * spacing.powi(3), spacing.powi(3), 0);
                     }
                 }
             }

@@ -10,6 +10,8 @@
 //! 3 components, in 2D only z) the material sees it take ahead in the next step (`State::body_kicks`); a
 //! checkpoint without it predicts none. `f` of a scene whose materials keep no deformation gradient (fluids
 //! only: the engine then holds none) is every particle's identity, and restoring one checks that it is.
+//! A particle's material is its body's (one material a body), so a checkpoint has no `material` array; an
+//! older checkpoint's is not read.
 
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};

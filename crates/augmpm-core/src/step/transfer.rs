@@ -244,7 +244,7 @@ pub fn p2g<const D: usize>(
             let x = particles.x[p];
             let (s, origin) = stencil(layout, &x, inv_h);
             reach.check(&s.base);
-            let material = &materials[particles.material[p] as usize];
+            let material = &materials[particles.body[p] as usize];
             let (mut rho, mut jp) = (0.0, particles.jp[p]);
             if let Some(g) = grid_density {
                 if !g.grid_mass.is_empty() {
@@ -486,7 +486,7 @@ where
     let pushes = Disjoint::new(pushes);
     let (h, inv_h) = (layout.h, 1.0 / layout.h);
     let apic = 4.0 * inv_h * inv_h;
-    let Particles { x, v, c, f, jp, material, mass, .. } = particles;
+    let Particles { x, v, c, f, jp, body, mass, .. } = particles;
     // Written at each particle's own index; empty when the model keeps no F.
     let f = Disjoint::new(f);
     let sum = x
@@ -494,7 +494,7 @@ where
         .zip(v.par_iter_mut())
         .zip(c.par_iter_mut())
         .zip(jp.par_iter_mut())
-        .zip(material.par_iter())
+        .zip(body.par_iter())
         .zip(mass.par_iter())
         .enumerate()
         .with_min_len(t.schedule.min_len(MIN_TASK))
@@ -638,7 +638,7 @@ mod tests {
             let x = Vector2::new(0.3 + 0.4 * rnd(), 0.3 + 0.4 * rnd());
             let v = Vector2::new(rnd() - 0.5, rnd() - 0.5);
             let m = 0.5 + rnd();
-            ps.push(x, v, m, 1.0, 0, 0);
+            ps.push(x, v, m, 1.0, 0);
             let last = ps.len() - 1;
             ps.c[last] = Matrix2::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.5, rnd() - 0.5);
         }
