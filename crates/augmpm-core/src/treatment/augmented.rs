@@ -745,8 +745,11 @@ impl<const D: usize> AugmentedGrid<D> {
 /// the particles near walls.
 #[derive(Clone, Debug, Default)]
 pub struct WallParticles<const D: usize> {
-    /// Per particle: its entry in the table, or [`WallParticles::NONE`].
-    slot: Vec<u32>,
+    /// One bit per particle, 64 to a word: whether it has an entry (bit `p % 64` of word `p / 64`).
+    has_entry: Vec<u64>,
+    /// Per word of `has_entry`: the entries of the particles before it. A particle's entry is this plus
+    /// the bits set below its own (half a byte per 64 particles where a slot per particle took 4 B each).
+    entries_before: Vec<u32>,
     /// Per entry: the particle, its inverse, the boundary points it sees and the sum Σw of the
     /// weights of its grid points.
     particle: Vec<u32>,
@@ -808,9 +811,6 @@ fn regular_moment<const D: usize>(h: Real) -> Matrix<D> {
 }
 
 impl<const D: usize> WallParticles<D> {
-    /// Slot of a particle that takes the closed form.
-    pub const NONE: u32 = u32::MAX;
-
     /// Finds the particles at `x` near walls and solves their MLS systems (eq. (5)). Returns
     /// how many were ill-conditioned or isolated. Allocates only when the table grows.
     pub fn update<Ops: DimOps<D>>(
@@ -822,20 +822,34 @@ impl<const D: usize> WallParticles<D> {
         use rayon::prelude::*;
         let parallel = x.len() >= crate::parallel::PARALLEL_MIN;
         let min_task = if parallel { crate::parallel::MIN_TASK } else { usize::MAX };
-        self.slot.resize(x.len(), Self::NONE);
-        self.slot.par_iter_mut().zip(x.par_iter()).enumerate().with_min_len(min_task).try_for_each(
-            |(p, (slot, xp))| {
-                *slot = if grid.takes_closed_form(layout, xp, p)? { Self::NONE } else { 0 };
+        let words = x.len().div_ceil(64);
+        self.has_entry.resize(words, 0);
+        self.has_entry.par_iter_mut().zip(x.par_chunks(64)).enumerate().with_min_len(min_task / 64).try_for_each(
+            |(w, (bits, xs))| {
+                *bits = 0;
+                for (b, xp) in xs.iter().enumerate() {
+                    if !grid.takes_closed_form(layout, xp, 64 * w + b)? {
+                        *bits |= 1 << b;
+                    }
+                }
                 Ok(())
             },
         )?;
-        // Entries in particle order (a serial pass: a few ns per particle).
-        let m = self.slot.par_iter().with_min_len(min_task).filter(|&&s| s != Self::NONE).count();
+        // Entries in particle order (a serial pass over the words).
+        self.entries_before.resize(words, 0);
+        let mut m = 0;
+        for (before, bits) in self.entries_before.iter_mut().zip(&self.has_entry) {
+            *before = m;
+            m += bits.count_ones();
+        }
+        let m = m as usize;
         resize_with_margin(&mut self.particle, m, 0);
         let mut next = 0;
-        for (p, slot) in self.slot.iter_mut().enumerate() {
-            if *slot != Self::NONE {
-                (*slot, self.particle[next]) = (next as u32, p as u32);
+        for (w, &bits) in self.has_entry.iter().enumerate() {
+            let mut rest = bits;
+            while rest != 0 {
+                self.particle[next] = (64 * w) as u32 + rest.trailing_zeros();
+                rest &= rest - 1;
                 next += 1;
             }
         }
@@ -868,20 +882,26 @@ impl<const D: usize> WallParticles<D> {
     /// The table entry of particle `p`, if its MLS system sees a wall.
     #[inline]
     pub fn entry(&self, p: usize) -> Option<WallEntry<'_, D>> {
-        let s = *self.slot.get(p)? as usize;
-        (s != Self::NONE as usize).then(|| WallEntry {
-            minv: &self.minv[s],
-            near: &self.near[s],
-            total: self.total[s],
-            tilt: self.tilt[s],
-            slot: s,
-        })
+        let bits = *self.has_entry.get(p / 64)?;
+        let below = 1u64 << (p % 64);
+        if bits & below == 0 {
+            return None;
+        }
+        let s = self.entries_before[p / 64] as usize + (bits & (below - 1)).count_ones() as usize;
+        Some(WallEntry { minv: &self.minv[s], near: &self.near[s], total: self.total[s], tilt: self.tilt[s], slot: s })
     }
 
-    /// Heap bytes of the table (`slot` is per particle, the rest per particle near a wall).
+    /// Heap bytes of the table (`has_entry` and `entries_before` are per 64 particles, the rest per
+    /// particle near a wall).
     pub fn heap_bytes(&self) -> usize {
         use crate::math::heap_bytes as b;
-        b(&self.slot) + b(&self.particle) + b(&self.minv) + b(&self.near) + b(&self.total) + b(&self.tilt)
+        b(&self.has_entry)
+            + b(&self.entries_before)
+            + b(&self.particle)
+            + b(&self.minv)
+            + b(&self.near)
+            + b(&self.total)
+            + b(&self.tilt)
     }
 
     /// Number of particles whose MLS system sees a wall.
@@ -930,6 +950,38 @@ mod tests {
         let mut region = Walls2::new(walls, Point::new(1.0, 1.0)).with_moves(vec![Some(shake), Some(path)]);
         let contacts = vec![WallContact::from(crate::wall::WallCondition::Slip); 3];
         follow_and_compare(&layout, &mut region, &contacts, 200);
+    }
+
+    /// The wall table gives entries to exactly the particles that do not take the closed form, numbered in
+    /// particle order across the 64-particle words of its bit index (200 then 130 particles on a line that
+    /// comes near a tilted wall, so words hold none or some of their particles near it, and the last word is
+    /// partly filled).
+    #[test]
+    fn the_table_numbers_the_particles_near_walls_in_order() {
+        let layout = GridLayout::<2>::new(1.0 / 32.0, [32, 32]);
+        let tank =
+            Polygon::new(vec![Point::new(0.1, 0.1), Point::new(0.9, 0.2), Point::new(0.9, 0.9), Point::new(0.1, 0.9)]);
+        let region = Walls2::new(vec![WallShape::Polygon(tank)], Point::new(1.0, 1.0));
+        let contacts = vec![WallContact::from(crate::wall::WallCondition::Slip); 2];
+        let grid = AugmentedGrid::new(&layout, &region, layout.h, contacts, 0.1 * layout.h);
+        let mut table = WallParticles::<2>::default();
+        for n in [200, 130] {
+            // Down the middle, from the top (away from walls) to the floor, then back up.
+            let x: Vec<Vector<2>> = (0..n)
+                .map(|p| {
+                    let t = (p as Real / (n - 1) as Real * 2.0 - 1.0).abs();
+                    Vector::<2>::new(0.5, 0.16 + 0.7 * t)
+                })
+                .collect();
+            table.update::<crate::math::Dim<2>>(&grid, &layout, &x).unwrap();
+            let near: Vec<usize> = (0..n).filter(|&p| !grid.takes_closed_form(&layout, &x[p], p).unwrap()).collect();
+            assert!(!near.is_empty() && near.len() < n / 2, "{} of {n} near the floor", near.len());
+            assert_eq!(table.len(), near.len());
+            for p in 0..n + 10 {
+                let slot = table.entry(p).map(|e| e.slot);
+                assert_eq!(slot, near.iter().position(|&q| q == p), "particle {p} of {n}");
+            }
+        }
     }
 
     /// Steps the walls of `region` `steps` times (2 ms each) and checks, after each, that following them

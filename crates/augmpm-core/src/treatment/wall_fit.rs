@@ -32,7 +32,35 @@ const MAX_ROWS: usize = MAX_FEET * 3;
 pub struct WallPush<const D: usize> {
     wall: [u32; MAX_FEET],
     dv: [Vector<D>; MAX_FEET],
-    moment: [Vector<3>; MAX_FEET],
+    /// Each moment's components about the axes a D-dimensional body turns about (`pack`): z in 2D, all
+    /// three in 3D. Each particle near a wall holds a push; 3-vectors in 2D took 32 B more.
+    moment: [Vector<D>; MAX_FEET],
+}
+
+/// A moment (only z in 2D) as the D reals [`WallPush`] keeps: (z, 0) in 2D.
+#[inline]
+fn pack<const D: usize>(l: &Vector<3>) -> Vector<D> {
+    Vector::<D>::from_fn(|k, _| {
+        if D == 2 {
+            if k == 0 {
+                l.z
+            } else {
+                0.0
+            }
+        } else {
+            l[k]
+        }
+    })
+}
+
+/// The moment [`pack`] packed.
+#[inline]
+fn unpack<const D: usize>(l: &Vector<D>) -> Vector<3> {
+    if D == 2 {
+        Vector::<3>::new(0.0, 0.0, l[0])
+    } else {
+        Vector::<3>::from_fn(|k, _| l[k])
+    }
 }
 
 impl<const D: usize> WallPush<D> {
@@ -43,7 +71,7 @@ impl<const D: usize> WallPush<D> {
         Self {
             wall: [Self::EMPTY; MAX_FEET],
             dv: [Vector::<D>::zeros(); MAX_FEET],
-            moment: [Vector::<3>::zeros(); MAX_FEET],
+            moment: [Vector::<D>::zeros(); MAX_FEET],
         }
     }
 
@@ -54,7 +82,7 @@ impl<const D: usize> WallPush<D> {
         if let Some(k) = slot {
             self.wall[k] = wall as u32;
             self.dv[k] += dv;
-            self.moment[k] += moment(at, &dv);
+            self.moment[k] += pack(&moment(at, &dv));
         }
     }
 
@@ -72,7 +100,7 @@ impl<const D: usize> WallPush<D> {
     pub fn iter(&self) -> impl Iterator<Item = (usize, Vector<D>, Vector<3>)> + '_ {
         (self.wall.iter().zip(&self.dv).zip(&self.moment))
             .take_while(|((&w, _), _)| w != Self::EMPTY)
-            .map(|((&w, &dv), &l)| (w as usize, dv, l))
+            .map(|((&w, &dv), l)| (w as usize, dv, unpack(l)))
     }
 }
 
