@@ -109,3 +109,47 @@ def test_3d_dam_break_sizes_bench_and_report():
         assert r["augmented_over_naive"] > 0 and r["memory"]["peak_bytes_per_particle"] > 100
     text = bench.format_report({"machine": bench._machine(1), "quick": True, "rows": rows})
     assert "| 32³ | " in text and "dam_break_3d_32 f32 augmented 1t" in text
+
+
+def _fake_peers(tmp_path, body: str):
+    peers = tmp_path / "peers"
+    peers.mkdir()
+    (peers / "run.sh").write_text(body)
+    return peers
+
+
+def test_peers_bench_alternates_with_the_peers_and_reports_the_ratio(tmp_path):
+    """The peers' script runs once a round, at the dam break's size, and each augmpm configuration's
+    median rate is reported over the faster peer's median (a stand-in script with known rates)."""
+    peers = _fake_peers(
+        tmp_path,
+        'echo "$1 $2 $3" >> "$(dirname "$0")/calls"\n'
+        'echo "building ..."\n'
+        'echo \'RESULT {"impl": "taichi_pt", "n": 8192, "pss_median": 1e6}\'\n'
+        'echo \'RESULT {"impl": "rust_rayon", "n": 8192, "pss_median": 4e6}\'\n',
+    )
+    rows = bench.bench_peers(peers, 128, steps=4, threads=1, rounds=2, log=lambda s: None)
+    assert (peers / "calls").read_text().splitlines() == ["S 1 4", "S 1 4"]
+    assert [(r["precision"], r["method"]) for r in rows] == [("f32", "naive"), ("f64", "naive"), ("f64", "augmented")]
+    for r in rows:
+        assert r["faster_peer"] == "rust_rayon" and r["peers"] == {"taichi_pt": 1e6, "rust_rayon": 4e6}
+        assert len(r["rounds_particle_steps_per_s"]) == 2
+        assert r["over_faster_peer"] == pytest.approx(r["particle_steps_per_s"] / 4e6)
+    augmented = rows[2]
+    assert augmented["augmented_over_naive"] == pytest.approx(
+        rows[1]["particle_steps_per_s"] / augmented["particle_steps_per_s"]
+    )
+    text = bench.format_report({"machine": bench._machine(1), "quick": True, "rows": rows})
+    assert "over the faster peer" in text and "rust_rayon 4.0" in text
+
+
+def test_peers_that_fail_or_are_missing_are_named(tmp_path):
+    """A missing script, a script that fails and one that prints no result are errors that say which."""
+    with pytest.raises(bench.PeerError, match=r"run\.sh not found"):
+        bench.bench_peers(tmp_path, 128, steps=2, threads=1, rounds=1)
+    failing = _fake_peers(tmp_path, 'echo "cargo: no network" >&2; exit 3\n')
+    with pytest.raises(bench.PeerError, match="exited with 3: cargo: no network"):
+        bench.bench_peers(failing, 128, steps=2, threads=1, rounds=1, log=lambda s: None)
+    (failing / "run.sh").write_text("echo nothing\n")
+    with pytest.raises(bench.PeerError, match="no RESULT line"):
+        bench.bench_peers(failing, 128, steps=2, threads=1, rounds=1, log=lambda s: None)

@@ -15,7 +15,11 @@ Cases (issue 5):
   same run without;
 - the cost of coupling rigid bodies (issue 15): ``rigid/floating_bodies`` from its state at 1 s, with its
   bodies free against the same state with each body replaced by a wall held where the body is (a wall
-  that may move but stands still, and a still wall).
+  that may move but stands still, and a still wall);
+- with ``--peers DIR`` (issue 16), the peer engines of ``DIR/run.sh`` (mpm88, Hu et al. 2018's 88-line
+  MLS-MPM fluid in float32, in Taichi and in Rust + rayon) on the same machine and thread count, at the
+  dam break's particle counts (65,536 on 256², 524,288 on 512²), alternated round by round with augmpm's
+  naive f32 and f64 and augmented f64 dam break: the ratio of particle-steps per second to the faster peer.
 
 Configurations compared with each other run interleaved in one process (A B A B …), because this
 machine's speed drifts by up to 2× over an hour; memory is measured in a fresh process per
@@ -30,6 +34,7 @@ import math
 import os
 import platform
 import resource
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -224,6 +229,101 @@ def _dam_break(resolution: int, dim: int) -> Scene | Scene3:
     return dam_break_scene(resolution) if dim == 2 else dam_break_3d_scene(resolution)
 
 
+#: Peer sizes (``run.sh``'s names) at the dam break's resolutions: 8,192 / 65,536 / 524,288 particles.
+PEER_SIZES = {128: "S", 256: "M", 512: "L"}
+#: Issue 16's targets against the faster peer (particle-steps per second, same machine, 2 threads).
+PEER_TARGETS = {("f32", "naive"): 1.2, ("f64", "naive"): 0.9}
+#: ... and of the augmented step's cost over the naive one's (f64).
+AUGMENTED_OVER_NAIVE_TARGET = 1.15
+
+
+def bench_peers(peers: Path, resolution: int, steps: int, threads: int, rounds: int = 3, log=print) -> list[dict]:
+    """augmpm's 2D dam break at ``resolution`` (naive f32 and f64, augmented f64, on ``threads``) against
+    the peer engines of ``peers/run.sh``, alternating: each round steps every augmpm configuration
+    ``steps`` times (interleaved) and then runs the peers (each reports the median of its own 3 timed runs
+    of ``steps`` steps). Per configuration, the median over the rounds of particle-steps per second and
+    its ratio to the faster peer's median; a missing script or a peer run that fails raises
+    ``PeerError``."""
+    script = Path(peers) / "run.sh"
+    if not script.is_file():
+        raise PeerError(f"--peers: {script} not found (the folder of the peer engines' run.sh)")
+    if resolution not in PEER_SIZES:
+        raise PeerError(f"--peers: no peer size for the {resolution}² dam break (sizes {sorted(PEER_SIZES)})")
+    configs = [("f32", "naive"), ("f64", "naive"), ("f64", "augmented")]
+    sims = {}
+    for p, m in configs:
+        scene = dam_break_scene(resolution).model_copy(update={"precision": p})
+        sims[f"{p}/{m}"] = Simulation(scene, m, threads=threads)
+        sims[f"{p}/{m}"].step(3)
+    ours: dict[str, list[float]] = {k: [] for k in sims}
+    theirs: dict[str, list[float]] = {}
+    peer_particles: dict[str, int] = {}
+    for r in range(rounds):
+        result = interleaved(sims, steps, rounds=1)
+        for k, row in result.items():
+            if "error" in row:
+                raise PeerError(f"the {resolution}² dam break, {k}, failed: {row['error']}")
+            ours[k].append(row["particle_steps_per_s"])
+        log(f"  round {r + 1}/{rounds}: peers {PEER_SIZES[resolution]} on {threads} threads …")
+        for impl, row in _run_peers(script, PEER_SIZES[resolution], threads, steps).items():
+            theirs.setdefault(impl, []).append(row["pss_median"])
+            peer_particles[impl] = row["n"]
+    peer = {impl: statistics.median(v) for impl, v in theirs.items()}
+    if not peer:
+        raise PeerError(f"{script} printed no RESULT line")
+    faster = max(peer, key=peer.get)
+    rows = []
+    naive64 = statistics.median(ours["f64/naive"])
+    for p, m in configs:
+        pss = statistics.median(ours[f"{p}/{m}"])
+        row = {
+            "case": f"peers_{resolution}",
+            "method": m,
+            "precision": p,
+            "threads": threads,
+            "rounds": rounds,
+            "steps": steps,
+            "particles": sims[f"{p}/{m}"].num_particles,
+            "particle_steps_per_s": pss,
+            "rounds_particle_steps_per_s": ours[f"{p}/{m}"],
+            "peers": peer,
+            "peers_rounds": theirs,
+            "peer_particles": peer_particles,
+            "faster_peer": faster,
+            "over_faster_peer": pss / peer[faster],
+            "target_over_faster_peer": PEER_TARGETS.get((p, m)),
+        }
+        if m == "augmented":
+            row["augmented_over_naive"] = naive64 / pss
+            row["target_augmented_over_naive"] = AUGMENTED_OVER_NAIVE_TARGET
+        rows.append(row)
+    return rows
+
+
+class PeerError(RuntimeError):
+    """The peer engines could not be run or read."""
+
+
+def _run_peers(script: Path, size: str, threads: int, steps: int) -> dict[str, dict]:
+    """One run of the peers' script at ``size``: its ``RESULT {json}`` lines by engine."""
+    try:
+        out = subprocess.run(
+            ["bash", str(script), size, str(threads), str(steps)], capture_output=True, text=True, check=True
+        )
+    except subprocess.CalledProcessError as e:
+        tail = "\n".join((e.stderr or "").strip().splitlines()[-5:])
+        raise PeerError(f"{script} {size} {threads} {steps} exited with {e.returncode}: {tail}") from None
+    results = {}
+    for line in out.stdout.splitlines():
+        if line.startswith("RESULT "):
+            try:
+                row = json.loads(line.removeprefix("RESULT "))
+                results[str(row["impl"])] = {"pss_median": float(row["pss_median"]), "n": int(row["n"])}
+            except (ValueError, KeyError, TypeError) as e:
+                raise PeerError(f"{script}: unreadable RESULT line {line[:120]!r} ({e})") from None
+    return results
+
+
 #: Shipped scenes whose walls move, timed against themselves with the walls held still.
 MOVING_SCENES = ("moving/shaken_tank", "moving/stirred_tank")
 
@@ -394,6 +494,7 @@ def run_bench(
     threads: int | None = None,
     sizes: tuple[int, ...] | None = None,
     log=print,
+    peers: Path | None = None,
 ) -> dict:
     """Every case; returns the report (also what ``--json`` writes)."""
     from augmpm import _core
@@ -402,6 +503,8 @@ def run_bench(
     fig1 = scene_path(fig1)
     if not fig1.is_file():
         raise _core.SceneError(f"--fig1: {fig1} not found (a scene file, or a shipped scene's name)")
+    if peers is not None and not (Path(peers) / "run.sh").is_file():
+        raise _core.SceneError(f"--peers: {Path(peers) / 'run.sh'} not found (the folder of the peer engines' run.sh)")
     threads = resolve_threads(threads)
     sizes = sizes or ((128, 256) if quick else (128, 256, 512))
     thread_counts = tuple(sorted({1, threads}))
@@ -424,6 +527,11 @@ def run_bench(
     report["rows"] += bench_rigid(rigid_steps, threads)
     log("output cost (fig1 with frames, images and animation) …")
     report["rows"] += bench_output(fig1, 1_000 if quick else FIG1_STEPS, threads)
+    if peers is not None:
+        peer_steps = {256: 60, 512: 20} if quick else {256: 200, 512: 60}
+        for res in (256, 512) if not quick else (256,):
+            log(f"peers ({peers}/run.sh) against the dam break {res}², {peer_steps[res]} steps, 3 rounds …")
+            report["rows"] += bench_peers(peers, res, peer_steps[res], threads, log=log)
     return report
 
 
@@ -515,6 +623,25 @@ def format_report(report: dict) -> str:
             lines.append(
                 f"| {r['method']} | {r['particles']:,} | {r['steps']} "
                 f"| {r['free_over_held']:.2f}× | {r['free_over_still']:.2f}× |"
+            )
+        lines.append("")
+    peers = [r for r in report["rows"] if r["case"].startswith("peers_")]
+    if peers:
+        lines += [
+            "| dam break vs peers (mpm88, f32) | particles | precision | method | threads "
+            "| M particle-steps/s (median of rounds) | peers (M) | over the faster peer | target |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ]
+        for r in peers:
+            theirs = ", ".join(f"{k} {v / 1e6:.1f}" for k, v in sorted(r["peers"].items()))
+            if r["target_over_faster_peer"] is not None:
+                target = f"≥ {r['target_over_faster_peer']}×"
+            else:
+                target = f"aug./naive {r['augmented_over_naive']:.2f} (≤ {r['target_augmented_over_naive']})"
+            lines.append(
+                f"| {r['case'].removeprefix('peers_')}² | {r['particles']:,} | {r['precision']} | {r['method']} "
+                f"| {r['threads']} | {r['particle_steps_per_s'] / 1e6:.1f} | {theirs} "
+                f"| {r['over_faster_peer']:.2f}× | {target} |"
             )
         lines.append("")
     out = [r for r in report["rows"] if r["case"] == "output"]

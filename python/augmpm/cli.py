@@ -79,6 +79,12 @@ def _parser() -> argparse.ArgumentParser:
         "--fig1", type=Path, default=SHIPPED_SCENES / "paper" / "fluid_incline_noslip.toml", help="Fig. 1 scene"
     )
     b.add_argument("--threads", type=int, metavar="N", help="threads of the multi-threaded rows (default: every core)")
+    b.add_argument(
+        "--peers",
+        type=Path,
+        metavar="DIR",
+        help="also run the peer engines of DIR/run.sh (mpm88 in Taichi and Rust) alongside the 2D dam break",
+    )
 
     v = sub.add_parser("validate", help="run the validation suite (analytic flows, experiments) and write a report")
     v.add_argument("--quick", action="store_true", help="coarse and short (a few minutes on 2 cores)")
@@ -206,13 +212,17 @@ def _validate(args: argparse.Namespace) -> int:
 def _bench(args: argparse.Namespace) -> int:
     import subprocess
 
-    from augmpm.bench import format_report, run_bench
+    from augmpm.bench import PeerError, format_report, run_bench
 
     try:
         report = run_bench(
-            quick=args.quick, fig1=args.fig1, threads=args.threads, log=lambda s: print(s, file=sys.stderr)
+            quick=args.quick,
+            fig1=args.fig1,
+            threads=args.threads,
+            log=lambda s: print(s, file=sys.stderr),
+            peers=args.peers,
         )
-    except (_core.SimulationError, subprocess.CalledProcessError) as e:
+    except (_core.SimulationError, subprocess.CalledProcessError, PeerError) as e:
         detail = getattr(e, "stderr", None) or ""
         print(f"augmpm: benchmark failed: {e}\n{detail}".rstrip(), file=sys.stderr)
         return EXIT_FAILED_RUN
