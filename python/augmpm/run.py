@@ -233,6 +233,8 @@ class _Run:
         self.files: ThreadPoolExecutor | None = None
         # The writes of metrics.csv and bodies.csv queued on it and not yet checked.
         self.metrics_writes: list[Future] = []
+        # How many committed rows have been handed to the files' thread for metrics.csv and bodies.csv.
+        self.rows_sent = 0
         self.total = int(meta["total_steps"])
         self.vtk_frames = [(float(r["time"]), f"vtk/frame_{i:05d}.vtp") for i, r in enumerate(rows)]
         # The walls of each frame (vtk/walls/, indexed by walls.pvd) when some move; still ones once
@@ -246,6 +248,11 @@ class _Run:
         self.columns = METRIC_COLUMNS + wall_force_columns(len(sim.wall_impulse) - 1, sim.dim)
         self.bodies = len(getattr(sim.scene, "rigid_bodies", []))
         self.columns += rigid_body_columns(self.bodies, sim.dim)
+        # The text of metrics.csv and bodies.csv, grown on the files' thread (only it touches them; it never
+        # touches the simulation).
+        self.metrics_text = _CsvText(self.columns)
+        self.body_fields = body_columns(sim.dim)
+        self.bodies_text = _CsvText(["frame", "step", "time", "body", *self.body_fields])
         # The walls' impulses at the last row, from which the next row's forces are measured.
         self.impulse_at = (sim.wall_impulse.copy(), sim.time)
         self.wall_frames = [(t, f.replace("vtk/", "vtk/walls/")) for t, f in self.vtk_frames] if self.walls else []
@@ -404,13 +411,9 @@ class _Run:
         missing, on the files' thread; with ``wait``, waits until it and every write queued before it are done.
         A write found failed raises its error."""
         if new_rows or not (self.out / "metrics.csv").exists():
-            buf = io.StringIO()
-            writer = csv.DictWriter(buf, fieldnames=self.columns, lineterminator="\r\n")
-            writer.writeheader()
-            writer.writerows(self.rows)
-            self.metrics_writes.append(self._submit(write_text, self.out / "metrics.csv", buf.getvalue()))
-            if self.bodies:
-                self.metrics_writes.append(self._submit(write_text, self.out / "bodies.csv", self._bodies_csv()))
+            # The rows are formatted on the files' thread too: here only the new ones are handed over.
+            first, self.rows_sent = self.rows_sent, len(self.rows)
+            self.metrics_writes.append(self._submit(self._write_csv, first, self.rows[first:]))
         if wait:
             # Everything queued before this point is written once the no-op behind it has run (one worker, in
             # order): rows committed earlier without waiting included.
@@ -420,17 +423,20 @@ class _Run:
             self.metrics_writes.remove(f)
             f.result()
 
-    def _bodies_csv(self) -> str:
-        """The text of ``bodies.csv``: the rigid bodies' columns of the committed rows, one row per frame and body."""
-        buf = io.StringIO()
-        columns = body_columns(self.sim.dim)
-        writer = csv.DictWriter(buf, fieldnames=["frame", "step", "time", "body", *columns], lineterminator="\r\n")
-        writer.writeheader()
-        for frame, row in enumerate(self.rows):
-            for k in range(self.bodies):
-                state = {c: row[f"rigid_{k}_{c}"] for c in columns}
-                writer.writerow({"frame": frame, "step": row["step"], "time": row["time"], "body": k, **state})
-        return buf.getvalue()
+    def _write_csv(self, first: int, rows: list[dict]) -> None:
+        """Writes ``metrics.csv`` and ``bodies.csv`` (the rigid bodies' columns of the rows, one row per frame
+        and body) with ``rows``, the committed rows from frame ``first`` on, added to those written before. Runs
+        on the files' thread, in order, so that each row is formatted once."""
+        write_text(self.out / "metrics.csv", self.metrics_text.add(rows))
+        if self.bodies:
+            columns = self.body_fields
+            per_body = [
+                {"frame": frame, "step": row["step"], "time": row["time"], "body": k}
+                | {c: row[f"rigid_{k}_{c}"] for c in columns}
+                for frame, row in enumerate(rows, start=first)
+                for k in range(self.bodies)
+            ]
+            write_text(self.out / "bodies.csv", self.bodies_text.add(per_body))
 
     def _submit(self, fn, *args) -> Future:
         """``fn(*args)`` on the files' thread (at once outside a run's loop)."""
@@ -439,6 +445,28 @@ class _Run:
             done.set_result(fn(*args))
             return done
         return self.files.submit(fn, *args)
+
+
+class _CsvText:
+    """The text of a CSV file with a header and rows added in order, each row formatted once."""
+
+    def __init__(self, fields: list[str]) -> None:
+        self.fields = fields
+        self.parts = [self._format(None)]
+
+    def _format(self, rows: list[dict] | None) -> str:
+        buf = io.StringIO()
+        writer = csv.DictWriter(buf, fieldnames=self.fields, lineterminator="\r\n")
+        if rows is None:
+            writer.writeheader()
+        else:
+            writer.writerows(rows)
+        return buf.getvalue()
+
+    def add(self, rows: list[dict]) -> str:
+        """The whole text with ``rows`` added."""
+        self.parts.append(self._format(rows))
+        return "".join(self.parts)
 
 
 def _write_walls(path: Path, walls: tuple[int, object]) -> None:
