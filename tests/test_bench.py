@@ -85,11 +85,14 @@ def test_rigid_coupling_bench_holds_the_bodies_where_they_are(monkeypatch):
 
 
 def test_memory_is_measured_in_a_fresh_process():
-    """Peak memory per particle of the 128² dam break: at least the 128 B of particle state
-    (plus the grid, ~17k nodes), and not absurd."""
+    """Peak memory per particle of the 128² dam break: at least the 104 B of a fluid particle's state (the
+    state fields but F, which only solids keep; plus the grid, ~17k nodes), and not absurd."""
+    size = {f["name"]: int(np.dtype(f["dtype"]).itemsize * np.prod(f["shape"])) for f in augmpm._core.state_fields()}
+    state = sum(size.values()) - size["f"]
+    assert state == 104
     m = bench._memory_in_subprocess(128, "naive", "f64")
-    assert 128 <= m["peak_bytes_per_particle"] < 2_000
-    assert 128 <= m["per_particle_without_grid"] < 200
+    assert state <= m["peak_bytes_per_particle"] < 2_000
+    assert state <= m["per_particle_without_grid"] <= 120
 
 
 def test_3d_dam_break_sizes_bench_and_report():
@@ -153,3 +156,37 @@ def test_peers_that_fail_or_are_missing_are_named(tmp_path):
     (failing / "run.sh").write_text("echo nothing\n")
     with pytest.raises(bench.PeerError, match="no RESULT line"):
         bench.bench_peers(failing, 128, steps=2, threads=1, rounds=1, log=lambda s: None)
+
+
+def test_stage_bytes_follow_the_state_field_table():
+    """The roofline's bytes per particle-step are the sizes of the engine's per-particle arrays each stage
+    reads and writes (2D f64 fluid: no F), so a field that changes size changes them."""
+    size = {f["name"]: int(np.dtype(f["dtype"]).itemsize * np.prod(f["shape"])) for f in augmpm._core.state_fields()}
+    reads_p2g = ["x", "v", "c", "jp", "mass", "vol0", "body"]
+    reads_g2p = ["x", "v", "c", "jp", "body", "mass", "density"]
+    writes_g2p = ["x", "v", "c", "jp"]
+    moved = bench.stage_bytes("f64", 2)
+    assert moved["density"] == sum(size[k] for k in ("x", "vol0", "jp", "body"))
+    assert moved["p2g"] == sum(size[k] for k in reads_p2g) + size["density"]
+    assert moved["g2p"] == sum(size[k] for k in reads_g2p + writes_g2p)
+    assert bench.stage_bytes("f64", 2, keeps_f=True)["p2g"] == moved["p2g"] + size["f"]
+
+
+def test_roofline_table_reads_the_machine_roofs():
+    """The machine's roofs are measured (positive, finite) and the report's roofline gives each stage's
+    share of the bandwidth from its measured time."""
+    roofs = bench.machine_roofs(1, mebibytes=4)
+    assert 0 < roofs["bandwidth_GBps"] < 1e4 and 0 < roofs["peak_GFLOPs"] < 1e5
+    row = {
+        "case": "dam_break_128",
+        "dim": 2,
+        "precision": "f64",
+        "method": "naive",
+        "threads": 1,
+        "particles": 1000,
+        "steps": 10,
+        "stages_s": {"density": 1e-3, "p2g": 2e-3, "g2p": 0.0},
+    }
+    lines = bench._roofline({"roofs": {"bandwidth_GBps": 10.0, "peak_GFLOPs": 50.0, "threads": 1}}, [row])
+    # density: 36 B x 1,000 particles x 10 steps in 1 ms = 0.36 GB/s, 4% of 10 GB/s.
+    assert "| dam_break_128 f64 naive 1t | 36 B / 0.4 (4%) | 100 B / 0.5 (5%) | – |" in lines

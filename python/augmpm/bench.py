@@ -488,6 +488,53 @@ def bench_rigid(steps: int, threads: int) -> list[dict]:
     return rows
 
 
+def machine_roofs(threads: int, mebibytes: int = 64) -> dict:
+    """The machine's measured roofs: memory bandwidth (GB/s, STREAM's add: two arrays of ``mebibytes`` MiB
+    read and one written per thread, on ``threads`` threads at once; numpy leaves the GIL while it adds;
+    best of 5) and peak f64 arithmetic (GFLOP/s, a 1,024² matrix product, 2n³ operations, through numpy's
+    BLAS on its own threads; best of 5)."""
+    import threading
+
+    import numpy as np
+
+    n = mebibytes * 2**20 // 8
+    arrays = [(np.ones(n), np.ones(n), np.empty(n)) for _ in range(threads)]
+    best = math.inf
+    for _ in range(5):
+        workers = [threading.Thread(target=np.add, args=(a, b), kwargs={"out": c}) for a, b, c in arrays]
+        t = time.perf_counter()
+        for w in workers:
+            w.start()
+        for w in workers:
+            w.join()
+        best = min(best, time.perf_counter() - t)
+    bandwidth = 3 * 8 * n * threads / best
+    m = np.ones((1024, 1024)) * 0.5
+    m @ m
+    best = math.inf
+    for _ in range(5):
+        t = time.perf_counter()
+        m @ m
+        best = min(best, time.perf_counter() - t)
+    return {"bandwidth_GBps": bandwidth / 1e9, "peak_GFLOPs": 2 * 1024**3 / best / 1e9, "threads": threads}
+
+
+def stage_bytes(precision: str, dim: int, keeps_f: bool = False) -> dict[str, int]:
+    """Bytes of particle data each per-particle stage of a fluid step reads and writes, per particle
+    (the engine's per-particle arrays: x, v, c, F where a material keeps it, J, mass, V0, body, density;
+    grid nodes are not counted, their 3^D per particle stay in cache). ``density`` reads x, V0, J and body;
+    ``p2g`` reads x, v, c, (F), J, mass, V0, body and writes the density; ``g2p`` reads x, v, c, (F), J,
+    body, mass and the density, and writes x, v, c, (F) and J."""
+    r = 4 if precision == "f32" else 8
+    vector, matrix, index = dim * r, dim * dim * r, 4
+    f = matrix if keeps_f else 0
+    return {
+        "density": vector + 2 * r + index,
+        "p2g": 2 * vector + matrix + f + 3 * r + index + r,
+        "g2p": (2 * vector + matrix + f + 2 * r + index + r) + (2 * vector + matrix + f + r),
+    }
+
+
 def run_bench(
     quick: bool = False,
     fig1: Path = DEFAULT_FIG1,
@@ -509,6 +556,8 @@ def run_bench(
     sizes = sizes or ((128, 256) if quick else (128, 256, 512))
     thread_counts = tuple(sorted({1, threads}))
     report = {"machine": _machine(threads), "quick": quick, "rows": []}
+    log(f"machine roofs (memory bandwidth, f64 peak) on {threads} threads …")
+    report["roofs"] = machine_roofs(threads)
     log(f"fig1 ({fig1}), {2_000 if quick else FIG1_STEPS} steps, naive and augmented …")
     report["rows"] += bench_fig1(fig1, 2_000 if quick else FIG1_STEPS, threads)
     steps = {128: 200, 256: 60, 512: 20} if quick else {128: 1000, 256: 300, 512: 60}
@@ -605,6 +654,7 @@ def format_report(report: dict) -> str:
             label = f"{r['case']} {r.get('precision', 'f64')} {r['method']} {r['threads']}t"
             lines.append(f"| {label} | {cells} |")
         lines.append("")
+        lines += _roofline(report, [r for r in dam if "error" not in r])
     moving = [r for r in report["rows"] if r["case"].startswith("moving_")]
     if moving:
         lines += ["| moving walls | method | particles | steps | step time, moving / still walls |"]
@@ -654,6 +704,38 @@ def format_report(report: dict) -> str:
                 f"| {r['run_with_output_s']:.2f} | {100 * r['output_fraction']:.0f}% |"
             )
     return "\n".join(lines)
+
+
+def _roofline(report: dict, rows: list[dict]) -> list[str]:
+    """The roofline table: per dam-break row and per-particle stage, the bytes a particle-step moves, the
+    bandwidth the stage reached (those bytes at its measured rate) and its share of the machine's."""
+    roofs = report.get("roofs")
+    if not roofs or not rows:
+        return []
+    stages = ("density", "p2g", "g2p")
+    lines = [
+        f"Roofline: memory bandwidth {roofs['bandwidth_GBps']:.1f} GB/s and f64 peak "
+        + f"{roofs['peak_GFLOPs']:.0f} GFLOP/s measured on {roofs['threads']} threads. Per stage: particle "
+        + "bytes per particle-step / GB/s reached (share of the bandwidth). Operations per stage are not "
+        + "counted: this machine kind exposes no floating-point counters.",
+        "",
+        "| dam break, config | " + " | ".join(stages) + " |",
+        "|---|" + "---|" * len(stages),
+    ]
+    for r in rows:
+        moved = stage_bytes(r["precision"], r.get("dim", 2))
+        cells = []
+        for stage in stages:
+            seconds = r["stages_s"].get(stage, 0.0)
+            if seconds <= 0:
+                cells.append("–")
+                continue
+            rate = moved[stage] * r["particles"] * r["steps"] / seconds / 1e9
+            cells.append(f"{moved[stage]} B / {rate:.1f} ({100 * rate / roofs['bandwidth_GBps']:.0f}%)")
+        label = f"{r['case']} {r['precision']} {r['method']} {r['threads']}t"
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    lines.append("")
+    return lines
 
 
 def _main_worker(argv: list[str]) -> None:
