@@ -268,12 +268,12 @@ impl<const D: usize> Particles<D> {
         self.x.is_empty()
     }
 
-    /// Adds a particle at rest state (F = I, J_p = 1, ∇v = 0).
+    /// Adds a particle at rest state (F = I, J_p = 1, ∇v = 0). Its F is not stored: an empty `f` holds every
+    /// particle at I, and a simulation whose materials keep F fills it (seeding then never holds it twice).
     pub fn push(&mut self, x: Vector<D>, v: Vector<D>, mass: Real, vol0: Real, body: u32) {
         self.x.push(x);
         self.v.push(v);
         self.c.push(Matrix::<D>::zeros());
-        self.f.push(Matrix::<D>::identity());
         self.jp.push(1.0);
         self.mass.push(mass);
         self.vol0.push(vol0);
@@ -332,7 +332,9 @@ mod tests {
         assert_eq!(names, ["x", "v", "c", "f", "jp", "mass", "vol0", "body"]);
         // 3D: 3 + 3 + 9 + 9 + 3 reals and 1 index per particle.
         assert_eq!(Particles::<3>::bytes_per_particle(), 27 * std::mem::size_of::<Real>() + 4);
-        assert!(p.heap_bytes() >= 2 * Particles::<3>::bytes_per_particle());
+        // Every array but the optional F, which the seeding leaves empty (every particle at F = I).
+        assert!(p.f.is_empty() && p.deformation_gradient(1) == Matrix::<3>::identity());
+        assert!(p.heap_bytes() >= 2 * (Particles::<3>::bytes_per_particle() - 9 * std::mem::size_of::<Real>()));
     }
 
     /// A column written from its f64 form reads back the same (matrices row by row).
@@ -342,6 +344,9 @@ mod tests {
         p.push(Vector::<2>::new(0.25, 0.5), Vector::<2>::new(1.0, -2.0), 3.0, 0.5, 1);
         p.c[0] = Matrix::<2>::new(1.0, 2.0, 3.0, 4.0);
         assert_eq!(Column::Matrix(&p.c).to_f64().unwrap(), [1.0, 2.0, 3.0, 4.0]);
+        // The empty F of a seeded particle reads as the identity; a kept column as it is.
+        assert_eq!(Column::Matrix(&p.f).to_f64_rows(2).unwrap(), [1.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 1.0]);
+        assert_eq!(Column::Matrix(&p.c).to_f64_rows(1), Column::Matrix(&p.c).to_f64());
         let mut q = Particles::<2>::default();
         for (from, mut to) in p.columns().iter().zip(q.columns_mut()) {
             match from.to_f64() {

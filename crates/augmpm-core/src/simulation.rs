@@ -531,6 +531,8 @@ where
         let mut particles = particles;
         if !model.keeps_deformation_gradient() {
             particles.f = Vec::new();
+        } else if particles.f.is_empty() {
+            particles.f = vec![Matrix::<D>::identity(); particles.len()];
         }
         let mut state = State::new(particles);
         state.wall_impulse = vec![Vector::<D>::zeros(); model.boundary.contacts().len()];
