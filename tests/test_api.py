@@ -117,8 +117,9 @@ def test_stage_times_and_memory_are_reported(small_scene):
     assert set(times) == {"sort", "density", "boundary", "p2g", "grid", "g2p"}
     assert all(t >= 0 for t in times.values()) and times["p2g"] > 0
     memory = sim.memory_use()
-    # Particle state: x, v (2 × 16 B), C, F (2 × 32 B), J_p, mass, V0 (3 × 8 B), body, material (2 × 4 B).
-    assert memory["particles"] >= 128 * sim.num_particles
+    # Particle state of this elastic body: x, v (2 × 16 B), C, F (2 × 32 B), J_p, mass, V0, density (4 × 8 B),
+    # body, bins (2 × 4 B).
+    assert memory["particles"] >= 136 * sim.num_particles
     assert memory["grid"] > 0 and memory["particle_scratch"] > 0
 
 

@@ -233,6 +233,8 @@ def _dam_break(resolution: int, dim: int) -> Scene | Scene3:
 PEER_SIZES = {128: "S", 256: "M", 512: "L"}
 #: Issue 16's targets against the faster peer (particle-steps per second, same machine, 2 threads).
 PEER_TARGETS = {("f32", "naive"): 1.2, ("f64", "naive"): 0.9}
+#: Longest a run of the peers' script may take (s): its first run builds them (a venv with Taichi, a Rust binary).
+PEER_TIMEOUT = 1800
 #: ... and of the augmented step's cost over the naive one's (f64).
 AUGMENTED_OVER_NAIVE_TARGET = 1.15
 
@@ -265,12 +267,13 @@ def bench_peers(peers: Path, resolution: int, steps: int, threads: int, rounds: 
                 raise PeerError(f"the {resolution}² dam break, {k}, failed: {row['error']}")
             ours[k].append(row["particle_steps_per_s"])
         log(f"  round {r + 1}/{rounds}: peers {PEER_SIZES[resolution]} on {threads} threads …")
-        for impl, row in _run_peers(script, PEER_SIZES[resolution], threads, steps).items():
+        found = _run_peers(script, PEER_SIZES[resolution], threads, steps)
+        if not found:
+            raise PeerError(f"{script} printed no RESULT line (round {r + 1})")
+        for impl, row in found.items():
             theirs.setdefault(impl, []).append(row["pss_median"])
             peer_particles[impl] = row["n"]
     peer = {impl: statistics.median(v) for impl, v in theirs.items()}
-    if not peer:
-        raise PeerError(f"{script} printed no RESULT line")
     faster = max(peer, key=peer.get)
     rows = []
     naive64 = statistics.median(ours["f64/naive"])
@@ -308,8 +311,14 @@ def _run_peers(script: Path, size: str, threads: int, steps: int) -> dict[str, d
     """One run of the peers' script at ``size``: its ``RESULT {json}`` lines by engine."""
     try:
         out = subprocess.run(
-            ["bash", str(script), size, str(threads), str(steps)], capture_output=True, text=True, check=True
+            ["bash", str(script), size, str(threads), str(steps)],
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=PEER_TIMEOUT,
         )
+    except subprocess.TimeoutExpired:
+        raise PeerError(f"{script} {size} {threads} {steps} ran past {PEER_TIMEOUT} s") from None
     except subprocess.CalledProcessError as e:
         tail = "\n".join((e.stderr or "").strip().splitlines()[-5:])
         raise PeerError(f"{script} {size} {threads} {steps} exited with {e.returncode}: {tail}") from None
@@ -490,13 +499,14 @@ def bench_rigid(steps: int, threads: int) -> list[dict]:
 
 def machine_roofs(threads: int, mebibytes: int = 64) -> dict:
     """The machine's measured roofs: memory bandwidth (GB/s, STREAM's add: two arrays of ``mebibytes`` MiB
-    read and one written per thread, on ``threads`` threads at once; numpy leaves the GIL while it adds;
-    best of 5) and peak f64 arithmetic (GFLOP/s, a 1,024² matrix product, 2n³ operations, through numpy's
+    read and one written per thread, on ``threads`` threads at once, at most 8 (1.5 GiB); numpy leaves the GIL
+    while it adds; best of 5) and peak f64 arithmetic (GFLOP/s, a 1,024² matrix product, 2n³ operations, through numpy's
     BLAS on its own threads; best of 5)."""
     import threading
 
     import numpy as np
 
+    threads = min(threads, 8)
     n = mebibytes * 2**20 // 8
     arrays = [(np.ones(n), np.ones(n), np.empty(n)) for _ in range(threads)]
     best = math.inf

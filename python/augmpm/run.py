@@ -412,8 +412,9 @@ class _Run:
         A write found failed raises its error."""
         if new_rows or not (self.out / "metrics.csv").exists():
             # The rows are formatted on the files' thread too: here only the new ones are handed over.
-            first, self.rows_sent = self.rows_sent, len(self.rows)
+            first = self.rows_sent
             self.metrics_writes.append(self._submit(self._write_csv, first, self.rows[first:]))
+            self.rows_sent = len(self.rows)
         if wait:
             # Everything queued before this point is written once the no-op behind it has run (one worker, in
             # order): rows committed earlier without waiting included.
@@ -427,16 +428,18 @@ class _Run:
         """Writes ``metrics.csv`` and ``bodies.csv`` (the rigid bodies' columns of the rows, one row per frame
         and body) with ``rows``, the committed rows from frame ``first`` on, added to those written before. Runs
         on the files' thread, in order, so that each row is formatted once."""
-        write_text(self.out / "metrics.csv", self.metrics_text.add(rows))
+        columns = self.body_fields
+        per_body = [
+            {"frame": frame, "step": row["step"], "time": row["time"], "body": k}
+            | {c: row[f"rigid_{k}_{c}"] for c in columns}
+            for frame, row in enumerate(rows, start=first)
+            for k in range(self.bodies)
+        ]
+        # Both texts are grown before either file is written: a failed write leaves them whole, for the next.
+        metrics, bodies = self.metrics_text.add(rows), self.bodies_text.add(per_body)
+        write_text(self.out / "metrics.csv", metrics)
         if self.bodies:
-            columns = self.body_fields
-            per_body = [
-                {"frame": frame, "step": row["step"], "time": row["time"], "body": k}
-                | {c: row[f"rigid_{k}_{c}"] for c in columns}
-                for frame, row in enumerate(rows, start=first)
-                for k in range(self.bodies)
-            ]
-            write_text(self.out / "bodies.csv", self.bodies_text.add(per_body))
+            write_text(self.out / "bodies.csv", bodies)
 
     def _submit(self, fn, *args) -> Future:
         """``fn(*args)`` on the files' thread (at once outside a run's loop)."""

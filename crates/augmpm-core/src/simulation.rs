@@ -529,6 +529,12 @@ where
             model.follow_walls(0.0, &[]);
         }
         let mut particles = particles;
+        assert!(
+            particles.f.is_empty() || particles.f.len() == particles.len(),
+            "F has {} entries for {} particles: it is kept for every particle or for none",
+            particles.f.len(),
+            particles.len()
+        );
         if !model.keeps_deformation_gradient() {
             particles.f = Vec::new();
         } else if particles.f.is_empty() {

@@ -56,8 +56,10 @@ macro_rules! state_conversions {
                 for (field, column) in State::<D>::fields().zip(state.columns()) {
                     let mut shape = vec![n];
                     shape.extend(field.kind.shape(D));
-                    // An optional column the model does not keep reads as every particle at rest (F = I).
-                    match (&column, column.to_f64_rows(n)) {
+                    // An optional column the model does not keep reads as every particle at rest (F = I); any
+                    // other column has one entry per particle.
+                    let reals = if field.optional { column.to_f64_rows(n) } else { column.to_f64() };
+                    match (&column, reals) {
                         (Column::Index(a), _) => d.set_item(field.name, PyArray1::from_slice(py, a))?,
                         (_, Some(data)) => d.set_item(field.name, PyArray1::from_vec(py, data).reshape(shape)?)?,
                         (_, None) => unreachable!("only index columns have no reals"),

@@ -231,6 +231,7 @@ pub fn p2g<const D: usize>(
 ) where
     Dim<D>: DimOps<D>,
 {
+    debug_assert!(keeps_f_for_all(particles, materials), "a material keeps F: it must be kept for every particle");
     let layout = t.layout;
     let (h, inv_h) = (layout.h, 1.0 / layout.h);
     let apic = 4.0 * dt * inv_h * inv_h;
@@ -486,6 +487,7 @@ where
     let pushes = Disjoint::new(pushes);
     let (h, inv_h) = (layout.h, 1.0 / layout.h);
     let apic = 4.0 * inv_h * inv_h;
+    debug_assert!(keeps_f_for_all(particles, materials), "a material keeps F: it must be kept for every particle");
     let Particles { x, v, c, f, jp, body, mass, .. } = particles;
     // Written at each particle's own index; empty when the model keeps no F.
     let f = Disjoint::new(f);
@@ -593,6 +595,14 @@ where
         max_move: sum.max_move,
         fastest: sum.fastest,
     }
+}
+
+/// Whether the particles hold F for each of them where a material keeps one (otherwise they read F = I).
+fn keeps_f_for_all<const D: usize>(particles: &Particles<D>, materials: &[Material]) -> bool
+where
+    Dim<D>: DimOps<D>,
+{
+    particles.f.len() == particles.len() || !materials.iter().any(ConstitutiveModel::<D>::keeps_deformation_gradient)
 }
 
 /// Distance (cell widths) within which a wall face enters a particle's fit: the B-spline support.
