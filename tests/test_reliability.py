@@ -169,7 +169,7 @@ def test_memory_refused_before_allocating(small_scene, monkeypatch):
     monkeypatch.setenv("AUGMPM_MEMORY_LIMIT", "1M")
     with pytest.raises(augmpm.SceneError) as err:
         augmpm.Simulation(scene)
-    # 0.09 m² at 400 particles per cell of (1/16 m)² is 9,216 particles of 176 B: 1.5 MiB, against 1.0 MiB.
+    # 0.09 m² at 400 particles per cell of (1/16 m)² is 9,216 particles of 172 B: 1.5 MiB, against 1.0 MiB.
     assert err.value.key == "bodies[0].seeding"
     assert re.search(r"about 1\.\d MiB \(9216 particles, \d+ grid nodes\) but only 1\.0 MiB", str(err.value))
     # Sizes keep their unit: a limit below a MiB is not rounded up to one.

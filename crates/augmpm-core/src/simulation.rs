@@ -657,7 +657,8 @@ where
             ));
         }
         // A model without F drops the checkpoint's; every particle must then be at F = I, as it kept it.
-        if let Some(i) = p.f.iter().position(|f| *f != Matrix::<D>::identity()).filter(|_| !keeps_f) {
+        let sheared = if keeps_f { None } else { p.f.iter().position(|f| *f != Matrix::<D>::identity()) };
+        if let Some(i) = sheared {
             return Err(format!("f of particle {i} is not the identity; no material of this scene keeps F"));
         }
         // Every check before anything changes (the schedule's restore is the first change).
