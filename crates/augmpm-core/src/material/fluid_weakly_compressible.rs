@@ -78,9 +78,10 @@ impl WeaklyCompressibleFluid {
     /// Pressure (Pa) at density `rho`.
     pub fn pressure(&self, rho: Real) -> Real {
         let ratio = rho / self.density;
-        // Integer exponents (the usual 1, 4, 7) by multiplication: powf is a libm call.
-        let power = if self.gamma.fract() == 0.0 && self.gamma <= 16.0 {
-            ratio.powi(self.gamma as i32)
+        // Integer exponents (the usual 1, 4, 7) by multiplication: powf is a libm call. (`fract()` would
+        // be one too on x86-64's baseline, which has no rounding instruction.)
+        let power = if self.gamma <= 16.0 && self.gamma == (self.gamma as u32) as Real {
+            crate::math::powu(ratio, self.gamma as u32)
         } else {
             ratio.powf(self.gamma)
         };
