@@ -231,6 +231,21 @@ pub fn powu(mut x: Real, mut n: u32) -> Real {
     }
 }
 
+/// `exp(x)`, by its Taylor series to x⁵ where |x| < 2⁻⁸ (the remainder, below x⁶/6! < 5·10⁻¹⁸, is under
+/// half an f64 ulp of the result: within an ulp of libm's), and by libm's `exp` elsewhere. A fluid's
+/// volume changes by exp(dt tr ∇v) per step, whose argument is a small fraction of a cell's strain: the
+/// libm call was ~6% of a fluid step. The series is summed in Estrin's order (powers of x² over pairs):
+/// a chain of five operations rather than Horner's ten.
+#[inline(always)]
+pub fn exp_near_zero(x: Real) -> Real {
+    if x.abs() < 1.0 / 256.0 {
+        let x2 = x * x;
+        (1.0 + x) + x2 * ((0.5 + x * (1.0 / 6.0)) + x2 * (1.0 / 24.0 + x * (1.0 / 120.0)))
+    } else {
+        x.exp()
+    }
+}
+
 /// Sets flush-to-zero and denormals-are-zero for the calling thread (x86-64; elsewhere a no-op).
 /// Impacts produce subnormal floats whose arithmetic is many times slower; at the scales of a
 /// simulation (velocities, masses, stresses far above 1e-308) flushing them changes nothing.
@@ -442,5 +457,23 @@ mod tests {
                 assert_eq!(powu(x, n).to_bits(), x.powi(n as i32).to_bits(), "{x}^{n}");
             }
         }
+    }
+
+    /// `exp_near_zero` is within one ulp of libm's `exp` (its series remainder is under half an ulp,
+    /// Horner's rule adds under one): over its series' range, at the range's ends, and past them
+    /// (libm's itself).
+    #[test]
+    fn exp_near_zero_matches_exp_within_an_ulp() {
+        let mut next = uniform(0x2545f4914f6cdd1du64);
+        let ulps = |x: f64| (exp_near_zero(x).to_bits() as i64 - x.exp().to_bits() as i64).abs();
+        let mut worst = 0;
+        for k in 0..20000 {
+            let x = next() / 128.0 * 0.999_999 * [1.0, 1e-3, 1e-8][k % 3];
+            worst = worst.max(ulps(x));
+        }
+        for x in [0.0, -0.0, 1.0 / 256.0 - 1e-18, -1.0 / 256.0 + 1e-18, 1.0 / 256.0, 0.5, -3.0, 40.0] {
+            worst = worst.max(ulps(x));
+        }
+        assert!(worst <= 1, "{worst} ulps");
     }
 }

@@ -115,7 +115,7 @@ impl<const D: usize> ConstitutiveModel<D> for WeaklyCompressibleFluid {
         // F is not needed; with the deformation estimate `jp` holds J, J̇ = J tr(∇v), integrated
         // exactly for the step's constant ∇v (J stays positive however large the step's divergence).
         if self.density_estimate == DensityEstimate::Deformation {
-            *jp *= (dt * grad_v.trace()).exp();
+            *jp *= crate::math::exp_near_zero(dt * grad_v.trace());
         }
     }
 
