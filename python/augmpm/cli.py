@@ -86,6 +86,17 @@ def _parser() -> argparse.ArgumentParser:
         help="also run the peer engines of DIR/run.sh (mpm88 in Taichi and Rust) alongside the 2D dam break",
     )
 
+    w = sub.add_parser("sweep", help="run a scene over a grid and/or random samples of its keys, on Dask")
+    w.add_argument("spec", type=Path, help="sweep spec (TOML): the base scene and what to vary")
+    w.add_argument("--out", type=Path, help="output directory (default: runs/<spec name>)")
+    w.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="a running Dask scheduler (tcp://host:port); default: a local cluster started for the sweep",
+    )
+    w.add_argument("--workers", type=int, metavar="N", help="workers of the local cluster (default: one per core)")
+    w.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
     v = sub.add_parser("validate", help="run the validation suite (analytic flows, experiments) and write a report")
     v.add_argument("--quick", action="store_true", help="coarse and short (a few minutes on 2 cores)")
     v.add_argument("--out", type=Path, default=Path("runs/validation"), help="output directory")
@@ -209,6 +220,18 @@ def _validate(args: argparse.Namespace) -> int:
     return EXIT_OK if all_augmented_pass(records) else EXIT_FAILED_RUN
 
 
+def _sweep(args: argparse.Namespace) -> int:
+    from augmpm.sweep import format_summary, load_spec, run_sweep
+
+    if args.workers is not None and args.scheduler is not None:
+        raise _core.SceneError("--workers: sizes the local cluster; not with --scheduler")
+    spec = load_spec(args.spec)
+    out = _output_dir(args.out or Path("runs") / args.spec.stem)
+    result = run_sweep(spec, out, scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress)
+    print(format_summary(result))
+    return EXIT_FAILED_RUN if result.counts()["error"] else EXIT_OK
+
+
 def _bench(args: argparse.Namespace) -> int:
     import subprocess
 
@@ -288,6 +311,8 @@ def main(argv: list[str] | None = None) -> int:
             return _validate(args)
         if args.command == "bench":
             return _bench(args)
+        if args.command == "sweep":
+            return _sweep(args)
         if args.command == "scenes":
             return _scenes()
         if args.command == "schema":

@@ -392,6 +392,13 @@ def apply_override(data: dict[str, Any], item: str) -> None:
     if "=" not in item:
         raise _plain_error("--set", f"expected key=value, got {item!r}")
     path, _, text = item.partition("=")
+    set_key(data, path, _parse_value(text.strip()) if text.strip() else None, item)
+
+
+def set_key(data: dict[str, Any], path: str, value: Any, item: str | None = None) -> None:
+    """Sets the scene key ``path`` (``a.b[0].c`` or ``a.b.0.c``) of ``data`` to ``value``, or removes it when
+    ``value`` is None; ``item`` names the override in errors (default: ``path``)."""
+    item = path if item is None else item
     parts = [p for p in path.strip().replace("[", ".").replace("]", "").split(".") if p]
     if not parts:
         raise _plain_error("--set", f"empty key in {item!r}")
@@ -408,12 +415,12 @@ def apply_override(data: dict[str, Any], item: str) -> None:
                 node[idx] = {}
         else:
             raise _plain_error(path, f"{'.'.join(parts[:i])} is not a table")
-        if last and not text.strip():
+        if last and value is None:
             if isinstance(node, dict) and idx not in node:
                 raise _plain_error(path, "cannot remove it: the scene has no such key")
             del node[idx]
         elif last:
-            node[idx] = _parse_value(text.strip())
+            node[idx] = value
         else:
             node = node[idx]
 
@@ -501,8 +508,9 @@ def _resolve_mesh_files(data: dict[str, Any], folder: Path) -> None:
             entry["file"] = str((folder / file).resolve())
 
 
-def load_scene(path: str | Path, overrides: list[str] | None = None) -> Scene:
-    """Reads and validates a TOML scene file, or a shipped scene by name (see :func:`scene_path`);
+def load_scene(path: str | Path, overrides: list[str] | None = None, values: dict[str, Any] | None = None) -> Scene:
+    """Reads and validates a TOML scene file, or a shipped scene by name (see :func:`scene_path`), with
+    ``key=value`` ``overrides`` (as ``--set``) and then scene ``values`` by key (see :func:`set_key`) applied;
     raises :class:`SceneError` on bad input."""
     path = scene_path(path)
     try:
@@ -517,6 +525,8 @@ def load_scene(path: str | Path, overrides: list[str] | None = None) -> Scene:
         raise _plain_error(str(path), f"not valid TOML: {e}") from None
     for item in overrides or []:
         apply_override(data, item)
+    for key, value in (values or {}).items():
+        set_key(data, key, value)
     # A mesh file is named relative to the scene file's folder.
     _resolve_mesh_files(data, path.parent)
     return scene_class(data).from_dict(data)
