@@ -97,6 +97,13 @@ def _parser() -> argparse.ArgumentParser:
     w.add_argument("--workers", type=int, metavar="N", help="workers of the local cluster (default: one per core)")
     w.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
+    d = sub.add_parser("dataset", help="generate a training set for learned simulators (GNS format), on Dask")
+    d.add_argument("spec", type=Path, help="dataset spec (TOML): trajectories, materials, resolution, seed")
+    d.add_argument("--out", type=Path, help="output directory (default: runs/<spec name>)")
+    d.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler (default: a local cluster)")
+    d.add_argument("--workers", type=int, metavar="N", help="workers of the local cluster (default: one per core)")
+    d.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
     v = sub.add_parser("validate", help="run the validation suite (analytic flows, experiments) and write a report")
     v.add_argument("--quick", action="store_true", help="coarse and short (a few minutes on 2 cores)")
     v.add_argument("--out", type=Path, default=Path("runs/validation"), help="output directory")
@@ -232,6 +239,18 @@ def _sweep(args: argparse.Namespace) -> int:
     return EXIT_FAILED_RUN if result.counts()["error"] else EXIT_OK
 
 
+def _dataset(args: argparse.Namespace) -> int:
+    from augmpm.dataset import format_summary, load_spec, make_dataset
+
+    if args.workers is not None and args.scheduler is not None:
+        raise _core.SceneError("--workers: sizes the local cluster; not with --scheduler")
+    spec = load_spec(args.spec)
+    out = _output_dir(args.out or Path("runs") / args.spec.stem)
+    result = make_dataset(spec, out, scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress)
+    print(format_summary(result))
+    return EXIT_OK
+
+
 def _bench(args: argparse.Namespace) -> int:
     import subprocess
 
@@ -313,6 +332,8 @@ def main(argv: list[str] | None = None) -> int:
             return _bench(args)
         if args.command == "sweep":
             return _sweep(args)
+        if args.command == "dataset":
+            return _dataset(args)
         if args.command == "scenes":
             return _scenes()
         if args.command == "schema":

@@ -86,15 +86,18 @@ def save_png(fig, path: str | Path, dpi: int = 80) -> None:
     plt.close(fig)
 
 
-def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
+def npz_bytes(arrays: dict[str, np.ndarray], compress: bool = False, allow_pickle: bool = False) -> bytes:
     """The ``.npz`` archive of ``arrays`` (readable by ``np.load``), byte for byte the same for
-    the same arrays: unlike ``np.savez`` it stamps no modification time into the archive."""
+    the same arrays: unlike ``np.savez`` it stamps no modification time into the archive. ``compress``:
+    deflated, as ``np.savez_compressed``; ``allow_pickle``: object arrays too (read back with
+    ``np.load(..., allow_pickle=True)``)."""
     buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_STORED) as z:
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED if compress else zipfile.ZIP_STORED) as z:
         for name, a in arrays.items():
             info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = z.compression
             member = io.BytesIO()
-            np.lib.format.write_array(member, np.asanyarray(a), allow_pickle=False)
+            np.lib.format.write_array(member, np.asanyarray(a), allow_pickle=allow_pickle)
             z.writestr(info, member.getvalue())
     return buf.getvalue()
 

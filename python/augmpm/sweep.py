@@ -34,6 +34,7 @@ metric against one parameter.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import itertools
@@ -42,6 +43,7 @@ import math
 import os
 import time as wallclock
 import tomllib
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -293,6 +295,34 @@ def _check_same_sweep(out: Path, spec: SweepSpec, runs: list[dict[str, Any]]) ->
     write_text(path, text)
 
 
+@contextlib.contextmanager
+def dask_client(scheduler: str | None, workers: int | None, client: Any = None) -> Iterator[tuple[Any, int | None]]:
+    """A Dask client and the threads each task's simulation should take: ``client`` itself if given;
+    else one on the scheduler at ``scheduler`` (each run on every core of its worker's machine unless
+    ``AUGMPM_THREADS`` says otherwise); else on a local cluster of ``workers`` processes (default: one per
+    core, each run on its share of the cores), started and stopped here."""
+    if client is not None:
+        yield client, None
+        return
+    from distributed import Client, LocalCluster
+
+    if workers is not None and workers < 1:
+        raise _plain_error("--workers", f"must be at least 1, got {workers}")
+    if scheduler is not None:
+        try:
+            own = Client(scheduler, timeout="30s")
+        except (OSError, TimeoutError, ValueError) as e:
+            raise _plain_error("--scheduler", f"cannot reach {scheduler}: {e}") from None
+        with own:
+            yield own, None
+        return
+    cores = os.cpu_count() or 1
+    n = workers or cores
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40)
+    with cluster, Client(cluster) as own:
+        yield own, max(1, cores // n)
+
+
 def _run_on_dask(
     spec: SweepSpec,
     out: Path,
@@ -303,26 +333,10 @@ def _run_on_dask(
     progress: bool,
     client: Any,
 ) -> dict[int, dict[str, Any]]:
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import as_completed
 
-    own = None
-    threads = None
-    if client is None:
-        if scheduler is None:
-            n = workers or os.cpu_count() or 1
-            threads = max(1, (os.cpu_count() or 1) // n)
-            cluster = LocalCluster(
-                n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40
-            )
-            own = Client(cluster)
-        else:
-            try:
-                own = Client(scheduler, timeout="30s")
-            except (OSError, TimeoutError, ValueError) as e:
-                raise _plain_error("--scheduler", f"cannot reach {scheduler}: {e}") from None
-        client = own
     summaries: dict[int, dict[str, Any]] = {}
-    try:
+    with dask_client(scheduler, workers, client) as (client, threads):
         futures = {
             client.submit(
                 run_one,
@@ -348,12 +362,6 @@ def _run_on_dask(
                 summaries[i] = {"status": "error", "error": f"{type(e).__name__}: {e}", "dir": run_name(i)}
             bar.update(1)
         bar.close()
-    finally:
-        if own is not None:
-            cluster = getattr(own, "cluster", None)
-            own.close()
-            if cluster is not None:
-                cluster.close()
     return summaries
 
 
@@ -492,7 +500,7 @@ def _plot(path: Path, spec: SweepSpec, rows: list[dict[str, Any]]) -> None:
     save_png(fig, path)
 
 
-def _bar(total: int, enabled: bool) -> Any:
+def _bar(total: int, enabled: bool, label: str = "sweep", unit: str = "run") -> Any:
     from augmpm.run import _NoBar
 
     if not enabled:
@@ -501,7 +509,7 @@ def _bar(total: int, enabled: bool) -> Any:
 
     from tqdm import tqdm
 
-    return tqdm(total=total, desc="sweep", unit="run", file=sys.stderr, dynamic_ncols=True)
+    return tqdm(total=total, desc=label, unit=unit, file=sys.stderr, dynamic_ncols=True)
 
 
 def format_summary(result: SweepResult) -> str:
