@@ -115,3 +115,48 @@ def test_animation_holds_every_drawn_frame_under_its_own_name(small_scene, suffi
         frames = [f for f in reader]
     assert len(frames) == 3
     assert frames[0].shape[:2] == (640, 640)
+
+
+def test_render_run_redraws_a_moving_run_as_it_was_drawn(tmp_path):
+    """`augmpm render RUN_DIR` draws a finished run again from its files alone: with the bodies' colours
+    (the default), every frame of a scene whose walls turn equals the run's own PNG except inside the
+    legend's box at the top right; the animation is written."""
+    import augmpm
+    from augmpm.render import render_run
+    from augmpm.run import run_scene
+
+    run = tmp_path / "run"
+    scene = augmpm.load_scene("moving/turning_box", ["time.output_interval=100"])
+    run_scene(scene, run, steps=300, progress=False, animation=None)
+    out, frames = render_run(run)
+    assert frames == 4 and out == run / "render" and (out / "animation.mp4").stat().st_size > 0
+    for k in range(frames):
+        before = np.asarray(Image.open(run / "frames" / f"frame_{k:05d}.png").convert("RGB"))
+        after = np.asarray(Image.open(out / "frames" / f"frame_{k:05d}.png").convert("RGB"))
+        rows, cols = np.nonzero((before != after).any(axis=2))
+        assert len(rows) > 0  # the legend
+        # The legend: 18 px a body, 8 px from the top and at most 200 px from the right.
+        assert rows.max() <= 8 + 18 * len(scene.bodies) and cols.min() > 640 - 200, (rows.max(), cols.min())
+
+
+def test_render_run_colours_by_a_field_with_a_colour_bar(tmp_path, capsys):
+    """Coloured by speed, the frames hold the colour bar (its top rows the top of the colour map); the size is
+    as asked.
+    A field the frames do not have is bad input (exit 2) naming the option and the fields there are."""
+    import augmpm
+    from augmpm.cli import main
+    from augmpm.render import field_colours
+    from augmpm.run import run_scene
+
+    run = tmp_path / "run"
+    run_scene(augmpm.load_scene("dam_break", ["grid.resolution=24"]), run, steps=200, progress=False, render=False)
+    assert main(["render", str(run), "--colour-by", "speed", "--size", "320", "--fps", "10"]) == 0
+    img = np.asarray(Image.open(run / "render" / "frames" / "frame_00005.png").convert("RGB"))
+    assert img.shape[1] == 320
+    top = field_colours(np.array([1.0]), 0.0, 1.0)[0].astype(int)
+    near_top = (np.abs(img.reshape(-1, 3).astype(int) - top) <= 12).all(axis=1).sum()
+    assert near_top >= 2 * 12  # two of the bar's rows at least (13 px wide inside its outline)
+    assert main(["render", str(run), "--colour-by", "pressure"]) == 2
+    err = capsys.readouterr().err
+    assert "--colour-by" in err and "speed" in err
+    assert main(["render", str(tmp_path / "nothing")]) == 2

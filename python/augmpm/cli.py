@@ -104,6 +104,20 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("--workers", type=int, metavar="N", help="workers of the local cluster (default: one per core)")
     d.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
+    rr = sub.add_parser("render", help="draw a finished run's frames and animation again, without running it")
+    rr.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="a run directory (augmpm run's output)")
+    rr.add_argument("--out", type=Path, help="output directory (default: RUN_DIR/render)")
+    rr.add_argument("--size", type=int, default=640, metavar="PX", help="frame width in pixels (default 640)")
+    rr.add_argument("--fps", type=int, default=20, help="animation frames per second (default 20)")
+    rr.add_argument(
+        "--colour-by",
+        default="body",
+        metavar="FIELD",
+        help="body (default, with a legend), speed, vx, vy, vz (3D) or a per-particle array of the frames "
+        "(with a colour bar)",
+    )
+    rr.add_argument("--gif", action="store_true", help="write animation.gif instead of animation.mp4")
+
     v = sub.add_parser("validate", help="run the validation suite (analytic flows, experiments) and write a report")
     v.add_argument("--quick", action="store_true", help="coarse and short (a few minutes on 2 cores)")
     v.add_argument("--out", type=Path, default=Path("runs/validation"), help="output directory")
@@ -251,6 +265,21 @@ def _dataset(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _render(args: argparse.Namespace) -> int:
+    from augmpm.render import render_run
+
+    out, frames = render_run(
+        args.run_dir,
+        args.out,
+        size_px=args.size,
+        fps=args.fps,
+        colour_by=args.colour_by,
+        animation="gif" if args.gif else "mp4",
+    )
+    print(f"{frames} frames drawn into {out}: frames/, animation.{'gif' if args.gif else 'mp4'}")
+    return EXIT_OK
+
+
 def _bench(args: argparse.Namespace) -> int:
     import subprocess
 
@@ -334,6 +363,8 @@ def main(argv: list[str] | None = None) -> int:
             return _sweep(args)
         if args.command == "dataset":
             return _dataset(args)
+        if args.command == "render":
+            return _render(args)
         if args.command == "scenes":
             return _scenes()
         if args.command == "schema":

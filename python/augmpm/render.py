@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import os
+import re
 import struct
 import sys
 import threading
@@ -222,6 +223,55 @@ class _BandPng:
         return _png(self.width, self.height, b"".join(parts))
 
 
+def _draw_key(img: np.ndarray, key: list[tuple[str, np.ndarray]], font: Any) -> None:
+    """A legend at the top right of ``img``: a square of each colour and its label."""
+    canvas = Image.fromarray(img)
+    pen = ImageDraw.Draw(canvas)
+    width = max(font.getbbox(label)[2] for label, _ in key) + 24
+    left, top = img.shape[1] - width - 8, 8
+    pen.rectangle((left - 4, top - 4, left + width, top + 18 * len(key)), fill=(255, 255, 255), outline=(120,) * 3)
+    for k, (label, colour) in enumerate(key):
+        y = top + 18 * k
+        pen.rectangle((left, y + 2, left + 12, y + 14), fill=tuple(int(c) for c in colour))
+        pen.text((left + 18, y), label, fill=(0, 0, 0), font=font)
+    img[...] = np.asarray(canvas)
+
+
+#: The colour map of a field (`augmpm render --colour-by`).
+FIELD_CMAP = "viridis"
+
+
+def field_colours(values: np.ndarray, low: float, high: float) -> np.ndarray:
+    """RGB (N, 3) uint8 of ``values`` on :data:`FIELD_CMAP` between ``low`` and ``high`` (clipped)."""
+    span = high - low if high > low else 1.0
+    t = np.clip((np.asarray(values, dtype=float) - low) / span, 0.0, 1.0)
+    return np.round(matplotlib.colormaps[FIELD_CMAP](np.nan_to_num(t))[:, :3] * 255).astype(np.uint8)
+
+
+def _draw_colour_bar(img: np.ndarray, label: str, low: float, high: float, font: Any) -> None:
+    """A vertical colour bar at the right of ``img`` from ``low`` (bottom) to ``high`` (top), labelled."""
+    h, w = img.shape[:2]
+    bar_h, bar_w = max(40, h // 3), 14
+    right = w - 8
+    top = 48  # below the caption
+    texts = [f"{high:.3g}", f"{low:.3g}"]
+    text_w = max(font.getbbox(t)[2] for t in [*texts, label])
+    left = right - bar_w - text_w - 10
+    canvas = Image.fromarray(img)
+    pen = ImageDraw.Draw(canvas)
+    pen.rectangle((left - 6, top - 24, right + 2, top + bar_h + 6), fill=(255, 255, 255), outline=(120,) * 3)
+    pen.text((left, top - 20), label, fill=(0, 0, 0), font=font)
+    ramp = field_colours(np.linspace(high, low, bar_h), low, high)
+    img2 = np.asarray(canvas).copy()
+    img2[top : top + bar_h, left : left + bar_w] = ramp[:, None, :]
+    canvas = Image.fromarray(img2)
+    pen = ImageDraw.Draw(canvas)
+    pen.rectangle((left, top, left + bar_w, top + bar_h), outline=(51,) * 3)
+    pen.text((left + bar_w + 6, top - 2), texts[0], fill=(0, 0, 0), font=font)
+    pen.text((left + bar_w + 6, top + bar_h - 14), texts[1], fill=(0, 0, 0), font=font)
+    img[...] = np.asarray(canvas)
+
+
 def lower_priority() -> None:
     """Lowers the calling thread's CPU priority to nice ``_WRITER_NICE``; processes it starts inherit it."""
     # Linux only: there the nice value is per thread and PRIO_PROCESS with a thread id sets just that thread's.
@@ -263,6 +313,8 @@ class FrameRenderer:
         fps: int = 20,
         outlines: list[np.ndarray] | None = None,
         surface: np.ndarray | None = None,
+        key: list[tuple[str, np.ndarray]] | None = None,
+        colour_bar: tuple[str, float, float] | None = None,
     ) -> None:
         self._camera: _Camera | None = None
         if len(scene.grid.domain) == 3:
@@ -281,6 +333,10 @@ class FrameRenderer:
             self._text_at = tuple(self.to_pixel(np.array([[0.01 * lx, 0.99 * ly]]))[0])
         self.title = title
         self._font = ImageFont.load_default(size=14)
+        if key:
+            _draw_key(self.background, key, self._font)
+        if colour_bar is not None:
+            _draw_colour_bar(self.background, *colour_bar, self._font)
         # Offsets from a particle's pixel to the pixels whose centre can lie within DOT_RADIUS_PX of it.
         r = int(np.ceil(DOT_RADIUS_PX))
         dr, dc = np.mgrid[-r : r + 1, -r : r + 1]
@@ -310,7 +366,12 @@ class FrameRenderer:
         return self._compose(x, body, time)[0]
 
     def _compose(
-        self, x: np.ndarray, body: np.ndarray, time: float, walls: list[np.ndarray] | None = None
+        self,
+        x: np.ndarray,
+        body: np.ndarray,
+        time: float,
+        walls: list[np.ndarray] | None = None,
+        colours: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """The frame, and which bands of ``_BandPng.BAND`` rows it changed from the background."""
         img = self.background.copy()
@@ -326,7 +387,7 @@ class FrameRenderer:
         dim = 3 if self._camera is not None else 2
         x = np.asarray(x, dtype=float).reshape(-1, dim)
         finite = np.isfinite(x).all(axis=1)
-        colours = COLOURS[np.asarray(body)[finite] % len(COLOURS)]
+        colours = COLOURS[np.asarray(body)[finite] % len(COLOURS)] if colours is None else colours[finite]
         x = x[finite]
         if self._camera is not None:
             # Far to near, so that the nearer particles cover the farther; farther ones darker.
@@ -391,24 +452,40 @@ class FrameRenderer:
         return r0, r0 + region.shape[0]
 
     def draw(
-        self, x: np.ndarray, body: np.ndarray, time: float, path: Path, walls: list[np.ndarray] | None = None
+        self,
+        x: np.ndarray,
+        body: np.ndarray,
+        time: float,
+        path: Path,
+        walls: list[np.ndarray] | None = None,
+        colours: np.ndarray | None = None,
     ) -> Future:
         """Draws particles ``x`` (N, 2) in m at ``time`` (s) into the PNG at ``path`` and the animation,
-        with the outlines ``walls`` ((M, 2) arrays in m: the moving walls where they are then).
+        with the outlines ``walls`` ((M, 2) arrays in m: the moving walls where they are then), coloured by
+        body, or by ``colours`` (N, 3) uint8 RGB.
 
         Returns once the frame is queued, with the future of its writing; the arrays are copied,
         so the caller may reuse them.
         """
         outlines = [np.array(w, dtype=float) for w in walls or []]
-        frame = (np.array(x, dtype=float), np.array(body), float(time), Path(path), outlines)
+        rgb = None if colours is None else np.array(colours, dtype=np.uint8)
+        frame = (np.array(x, dtype=float), np.array(body), float(time), Path(path), outlines, rgb)
         future = self._pool.submit(self._write, *frame)
         self._pending.append(future)
         while len(self._pending) > _MAX_PENDING:
             self._pending.popleft().result()
         return future
 
-    def _write(self, x: np.ndarray, body: np.ndarray, time: float, path: Path, walls: list[np.ndarray]) -> None:
-        img, changed = self._compose(x, body, time, walls)
+    def _write(
+        self,
+        x: np.ndarray,
+        body: np.ndarray,
+        time: float,
+        path: Path,
+        walls: list[np.ndarray],
+        colours: np.ndarray | None = None,
+    ) -> None:
+        img, changed = self._compose(x, body, time, walls, colours)
         write_bytes(path, self._png.encode(img, changed))
         if self._animation is not None:
             self._animation.append_data(img)
@@ -445,3 +522,112 @@ def write_animation(frames: list[Path], path: Path, fps: int = 20) -> None:
             img = imageio.imread(f)
             w.append_data(img if path.suffix == ".gif" else img[..., :3])
     partial.replace(path)
+
+
+#: Units of the fields `augmpm render --colour-by` knows; any other per-particle array of a frame is drawn
+#: too, labelled with its name.
+FIELD_UNITS = {"speed": "m/s", "vx": "m/s", "vy": "m/s", "vz": "m/s"}
+
+
+def _field(frame: Any, name: str) -> np.ndarray:
+    """A per-particle scalar of a frame's arrays: ``speed``, ``vx``/``vy``/``vz`` or a stored (N,) array."""
+    if name == "speed":
+        return np.linalg.norm(frame["v"], axis=1)
+    if name in ("vx", "vy", "vz"):
+        return frame["v"][:, "xyz".index(name[1])]
+    return np.asarray(frame[name], dtype=float)
+
+
+def render_run(
+    run_dir: str | Path,
+    out: str | Path | None = None,
+    size_px: int = 640,
+    fps: int = 20,
+    colour_by: str = "body",
+    animation: str = "mp4",
+) -> tuple[Path, int]:
+    """Draws the frames of the finished (or interrupted) run in ``run_dir`` again, without running it:
+    PNGs into ``out/frames/`` (default ``run_dir/render``) and ``out/animation.<animation>``, ``size_px``
+    wide at ``fps`` frames per second, the particles coloured by body (with a legend of the bodies'
+    materials) or by the field ``colour_by`` (with a colour bar over its range in all frames). Returns the
+    directory and the number of frames; bad input raises :class:`augmpm.SceneError` naming the option."""
+    from augmpm.files import output_dir
+    from augmpm.scene import _plain_error, load_scene
+    from augmpm.vtk import read_outlines
+
+    run_dir = Path(run_dir)
+    if not (run_dir / "scene.toml").is_file() or not (run_dir / "particles").is_dir():
+        raise _plain_error("RUN_DIR", f"{run_dir} is not a run directory (no scene.toml and particles/)")
+    if not 64 <= size_px <= 8192:
+        raise _plain_error("--size", f"must lie in [64, 8192] px, got {size_px}")
+    if not 1 <= fps <= 240:
+        raise _plain_error("--fps", f"must lie in [1, 240], got {fps}")
+    if animation not in ("mp4", "gif"):
+        raise _plain_error("--animation", f"must be mp4 or gif, got {animation!r}")
+    scene = load_scene(run_dir / "scene.toml")
+    frames = sorted((run_dir / "particles").glob("frame_*.npz"))
+    if not frames:
+        raise _plain_error("RUN_DIR", f"{run_dir / 'particles'} holds no frame")
+    dim = len(scene.grid.domain)
+    key, bar, low, high = None, None, 0.0, 1.0
+    if colour_by == "body":
+        names = [getattr(b, "name", None) or b.material.type for b in scene.bodies]
+        key = [(f"body {k}: {name}", COLOURS[k % len(COLOURS)]) for k, name in enumerate(names)]
+    else:
+        values = []
+        for f in frames:
+            with np.load(f) as z:
+                known = ["body", *FIELD_UNITS][: 4 + (dim == 3)]
+                stored = [k for k in z.files if z[k].shape == z["body"].shape and k != "body"]
+                if colour_by not in known + stored:
+                    raise _plain_error(
+                        "--colour-by", f"{colour_by!r} is not a field of the frames ({', '.join(known + stored)})"
+                    )
+                v = _field(z, colour_by)
+                values.append(v[np.isfinite(v)])
+        every = np.concatenate(values) if values else np.zeros(1)
+        low, high = (float(every.min()), float(every.max())) if every.size else (0.0, 1.0)
+        unit = FIELD_UNITS.get(colour_by)
+        bar = (f"{colour_by} ({unit})" if unit else colour_by, low, high)
+    moving = [w.motion is not None for w in scene.walls] + [True] * len(getattr(scene, "rigid_bodies", []))
+    walls_move = (run_dir / "walls.pvd").exists()
+    still = run_dir / "vtk" / "walls" / "walls.vtp"
+    outlines = surface = None
+    if still.exists():
+        if dim == 3:
+            surface = read_outlines(still, 3)[0]
+        else:
+            outlines = read_outlines(still)
+    elif walls_move and dim == 2:
+        first = run_dir / "vtk" / "walls" / frames[0].with_suffix(".vtp").name
+        outlines = read_outlines(first) if first.exists() else None
+    out = output_dir(run_dir / "render" if out is None else out, "--out")
+    (out / "frames").mkdir(exist_ok=True)
+    # As the run titled its frames: the scene's name and the method, which scene.toml's first line gives.
+    header = (run_dir / "scene.toml").read_text(encoding="utf-8").partition("\n")[0]
+    method = re.search(r"method = (\w+)", header)
+    title = f"{scene.name or run_dir.name}" + (f" ({method.group(1)})" if method else "")
+    title += "" if colour_by == "body" else f": {colour_by}"
+    renderer = FrameRenderer(
+        scene,
+        title=title,
+        size_px=size_px,
+        animation=out / f"animation.{animation}",
+        fps=fps,
+        outlines=outlines,
+        surface=surface,
+        key=key,
+        colour_bar=bar,
+    )
+    with contextlib.closing(renderer):
+        for f in frames:
+            with np.load(f) as z:
+                x, body, time = z["x"], z["body"], float(z["time"])
+                colours = None if colour_by == "body" else field_colours(_field(z, colour_by), low, high)
+            walls = None
+            wall_file = run_dir / "vtk" / "walls" / f.with_suffix(".vtp").name
+            if walls_move and wall_file.exists():
+                now = read_outlines(wall_file, dim)
+                walls = now if dim == 3 else [o for o, m in zip(now, moving, strict=False) if m]
+            renderer.draw(x, body, time, out / "frames" / f.with_suffix(".png").name, walls=walls, colours=colours)
+    return out, len(frames)

@@ -8,6 +8,7 @@ natural type of a point cloud, so the few lines of XML are written here.
 from __future__ import annotations
 
 import base64
+import re
 from pathlib import Path
 
 import numpy as np
@@ -90,3 +91,35 @@ def write_pvd(path: Path, frames: list[tuple[float, str]]) -> None:
         f"{rows}\n</Collection>\n</VTKFile>\n",
         encoding="ascii",
     )
+
+
+_DATA_ARRAY = re.compile(r'<DataArray type="(\w+)" Name="(\w+)" NumberOfComponents="(\d+)" format="binary">([^<]*)<')
+_NUMPY_TYPES = {name: dtype for dtype, name in _VTK_TYPES.items()}
+
+
+def read_vtp(path: Path) -> dict[str, np.ndarray]:
+    """The arrays of a ``.vtp`` written here (:func:`write_vtp`, :func:`write_outlines_vtp`) by name:
+    ``Points`` (M, 3), ``connectivity`` and ``offsets`` of its vertices or lines, and its point or cell
+    data. Not a general VTK reader."""
+    arrays = {}
+    for kind, name, components, payload in _DATA_ARRAY.findall(Path(path).read_text(encoding="ascii")):
+        raw = base64.b64decode(payload)
+        size = int(np.frombuffer(raw[:4], dtype=np.uint32)[0])
+        a = np.frombuffer(raw[4 : 4 + size], dtype=_NUMPY_TYPES[kind])
+        arrays[name] = a.reshape(-1, int(components)) if int(components) > 1 else a
+    return arrays
+
+
+def read_outlines(path: Path, dim: int = 2) -> list[np.ndarray]:
+    """The closed outlines (M, 2) of a file of :func:`write_outlines_vtp` (2D), or its points (M, 3) as one
+    array (a 3D frame's wall surface points, :func:`write_vtp`)."""
+    a = read_vtp(path)
+    points = a["Points"]
+    if dim == 3:
+        return [points]
+    outlines, start = [], 0
+    for end in a["offsets"]:
+        ids = a["connectivity"][start : end - 1]  # the last repeats the first
+        outlines.append(points[ids, :2])
+        start = end
+    return outlines
