@@ -47,6 +47,8 @@ def _range(schema: dict[str, Any]) -> str:
     schema = _resolve(schema)
     if (options := _choices(schema)) is not None:
         return ", ".join(f"`{o['const']}`" for o in options)
+    if schema.get("type") == "array" and _choices(schema["items"]) is not None:
+        return "each of " + _range(schema["items"])
     if (number := _infinite(schema)) is not None:
         return _range(number).replace("∞)", "∞]")
     target = schema
@@ -94,6 +96,8 @@ def _default(schema: dict[str, Any], required: bool) -> str:
 
 def _doc(schema: dict[str, Any]) -> str:
     doc = _one_line(schema.get("description"))
+    if schema.get("type") == "array" and _choices(schema["items"]) is not None:
+        schema = {**schema, "oneOf": _choices(schema["items"])}
     if (options := _choices(schema)) is not None:
         doc += " " + "; ".join(f"`{o['const']}`: {_one_line(o.get('description')).rstrip('.')}" for o in options) + "."
     return doc.replace("|", "\\|")
@@ -140,7 +144,8 @@ def _nested(path: str, properties: dict[str, Any], out: list[list[str]]) -> None
         prop = _DEFS[prop["$ref"].rsplit("/", 1)[-1]] if "$ref" in prop else prop
         child = f"{path}.{key}" if path else key
         if prop.get("type") == "array" and "$ref" in prop.get("items", {}):
-            _tables(f"{child}[]", prop["items"], out)
+            if _choices(prop["items"]) is None:  # a list of names has no table of its own
+                _tables(f"{child}[]", prop["items"], out)
         elif (prop.get("type") == "object" or "oneOf" in prop) and _choices(prop) is None:
             if any(section[0].startswith(f"#### `{child}") for section in out):
                 continue

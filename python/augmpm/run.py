@@ -39,7 +39,7 @@ from augmpm.files import npz_bytes, output_dir, remove_stale_temporaries, write_
 from augmpm.render import FrameRenderer, lower_priority, write_animation
 from augmpm.scene import Scene, Scene3, _plain_error, scene_class
 from augmpm.simulation import Method, Simulation
-from augmpm.vtk import write_outlines_vtp, write_pvd, write_vtp
+from augmpm.vtk import write_outlines_vtp, write_ply, write_pvd, write_vtp
 
 METRIC_COLUMNS = [
     "step",
@@ -259,7 +259,12 @@ class _Run:
         if (outlines or sim.dim == 3) and not self.walls:
             (out / "vtk" / "walls").mkdir(parents=True, exist_ok=True)
             self._write_walls(out / "vtk" / "walls" / "walls.vtp")
-        for sub in ("particles", "frames", "vtk", *(["vtk/walls"] if self.walls else [])):
+        # The per-particle fields each frame holds besides x, v and body, and whether it goes to PLY too.
+        output = getattr(sim.scene, "output", None)
+        self.fields = list(output.fields) if output is not None else []
+        self.ply = bool(output is not None and output.ply)
+        subs = ["particles", "frames", "vtk", *(["vtk/walls"] if self.walls else []), *(["ply"] if self.ply else [])]
+        for sub in subs:
             (out / sub).mkdir(exist_ok=True)
 
     def go(self, raise_on_failure: bool) -> RunResult:
@@ -337,6 +342,7 @@ class _Run:
         x, v, body = sim.positions, sim.velocities, sim.body
         name = f"frame_{self.frame:05d}"
         arrays = {"x": x, "v": v, "body": body, "time": sim.time, "step": sim.steps_done}
+        arrays.update(particle_fields(sim, self.fields))
         if self.bodies:
             arrays["rigid_bodies"] = sim.rigid_bodies
         self.vtk_frames.append((sim.time, f"vtk/{name}.vtp"))
@@ -347,7 +353,10 @@ class _Run:
             self.wall_frames.append((sim.time, f"vtk/walls/{name}.vtp"))
         # What the files hold is taken now; the thread writes them while the simulation goes on.
         frame_files = [
-            self._submit(_write_frame, out, name, arrays, list(self.vtk_frames), walls, list(self.wall_frames))
+            self._submit(
+                _write_frame,
+                *(out, name, arrays, list(self.vtk_frames), walls, list(self.wall_frames), self.fields, self.ply),
+            )
         ]
         if self.renderer is not None:
             moving = [outline for outline, moves in sim.wall_outlines() if moves]
@@ -481,6 +490,28 @@ def _write_walls(path: Path, walls: tuple[int, object]) -> None:
         write_outlines_vtp(path, data)
 
 
+#: The per-particle fields a scene's ``output.fields`` may name, as a frame's arrays hold them.
+OUTPUT_FIELDS = ("density", "pressure", "J", "stress", "plastic")
+
+
+def particle_fields(sim: Simulation, names: list[str]) -> dict[str, np.ndarray]:
+    """The fields ``names`` (of :data:`OUTPUT_FIELDS`) of the simulation's particles now: ``density``
+    (kg/m², kg/m³ in 3D: what the material saw in the last step), ``pressure`` (−tr σ / D: N/m, Pa in 3D),
+    ``J`` (V/V⁰), ``stress`` (Cauchy, (N, D, D): N/m, Pa in 3D) and ``plastic`` (J_p)."""
+    if not names:
+        return {}
+    fields = sim.particle_fields()
+    out = {}
+    for name in names:
+        if name == "density":
+            out[name] = sim.densities
+        elif name == "pressure":
+            out[name] = -np.trace(fields["stress"], axis1=1, axis2=2) / sim.dim
+        else:
+            out[name] = fields[name]
+    return out
+
+
 def _write_frame(
     out: Path,
     name: str,
@@ -488,10 +519,16 @@ def _write_frame(
     vtk_frames: list[tuple[float, str]],
     walls: tuple[int, object] | None,
     wall_frames: list[tuple[float, str]],
+    fields: list[str] = (),
+    ply: bool = False,
 ) -> None:
-    """A frame's files: the particles' npz and VTK, the VTK collection up to it, and where walls move, theirs."""
+    """A frame's files: the particles' npz and VTK (and PLY), the VTK collection up to it, and where walls
+    move, theirs."""
     write_npz(out / "particles" / f"{name}.npz", arrays)
-    write_vtp(out / "vtk" / f"{name}.vtp", arrays["x"], {"velocity": arrays["v"], "body": arrays["body"]})
+    point_data = {"velocity": arrays["v"], "body": arrays["body"], **{f: arrays[f] for f in fields}}
+    write_vtp(out / "vtk" / f"{name}.vtp", arrays["x"], point_data)
+    if ply:
+        write_ply(out / "ply" / f"{name}.ply", arrays["x"], point_data)
     write_pvd(out / "particles.pvd", vtk_frames)
     if walls is not None:
         _write_walls(out / "vtk" / "walls" / f"{name}.vtp", walls)
@@ -553,7 +590,7 @@ def _read_metrics(path: Path) -> list[dict[str, str]]:
 
 def _remove_frames_after(out: Path, frame: int) -> None:
     """Removes the frame files numbered above ``frame`` (all of them for -1)."""
-    for sub in ("particles", "frames", "vtk", "vtk/walls"):
+    for sub in ("particles", "frames", "vtk", "vtk/walls", "ply"):
         if (out / sub).is_dir():
             for f in (out / sub).glob("frame_*.*"):
                 m = _FRAME.match(f.name)

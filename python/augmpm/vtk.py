@@ -37,6 +37,10 @@ def write_vtp(path: Path, x: np.ndarray, point_data: dict[str, np.ndarray]) -> N
     arrays = []
     for name, a in point_data.items():
         a = np.asarray(a)
+        if a.ndim == 3:  # a D×D tensor per point: VTK's 3×3, row-major
+            a3 = np.zeros((n, 3, 3), dtype=a.dtype)
+            a3[:, : a.shape[1], : a.shape[2]] = a
+            a = a3.reshape(n, 9)
         if a.ndim == 2 and a.shape[1] == 2:
             a3 = np.zeros((n, 3), dtype=a.dtype)
             a3[:, :2] = a
@@ -123,3 +127,36 @@ def read_outlines(path: Path, dim: int = 2) -> list[np.ndarray]:
         outlines.append(points[ids, :2])
         start = end
     return outlines
+
+
+def write_ply(path: Path, x: np.ndarray, point_data: dict[str, np.ndarray]) -> None:
+    """Writes particles (N, 2) at z = 0 (or (N, 3)) as a binary PLY point cloud (``plyfile``), with each
+    per-point array as vertex properties: scalars by name, vectors by component (``velocity_x``, ...),
+    tensors by entry (``stress_xy``, ...). The same arrays give the same bytes (no time stamp)."""
+    import io
+
+    from plyfile import PlyData, PlyElement
+
+    n = len(x)
+    columns: list[tuple[str, np.ndarray]] = [(axis, np.zeros(n)) for axis in "xyz"]
+    for k in range(x.shape[1]):
+        columns[k] = ("xyz"[k], np.asarray(x[:, k], dtype=np.float64))
+    for name, a in point_data.items():
+        a = np.asarray(a)
+        if a.ndim == 1:
+            columns.append((name, a))
+        elif a.ndim == 2:
+            columns += [(f"{name}_{'xyz'[k]}", a[:, k]) for k in range(a.shape[1])]
+        else:
+            columns += [
+                (f"{name}_{'xyz'[i]}{'xyz'[j]}", a[:, i, j]) for i in range(a.shape[1]) for j in range(a.shape[2])
+            ]
+    dtype = [(name, "i4" if np.issubdtype(c.dtype, np.integer) else "f8") for name, c in columns]
+    vertices = np.empty(n, dtype=dtype)
+    for name, c in columns:
+        vertices[name] = c
+    buffer = io.BytesIO()
+    PlyData([PlyElement.describe(vertices, "vertex")], text=False, byte_order="<").write(buffer)
+    from augmpm.files import write_bytes
+
+    write_bytes(path, buffer.getvalue())

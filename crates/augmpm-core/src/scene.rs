@@ -519,6 +519,42 @@ pub struct Scene {
     /// Floating-point precision of the engine: the same code in double or single precision.
     #[serde(default)]
     pub precision: Precision,
+    /// What a run writes besides positions, velocities and bodies.
+    #[serde(default)]
+    pub output: OutputSpec,
+}
+
+/// What a run writes of each frame besides the particles' positions, velocities and bodies.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct OutputSpec {
+    /// Per-particle fields written into each frame's npz and VTK files.
+    #[serde(default)]
+    pub fields: Vec<OutputField>,
+    /// Also write each frame's particles as a PLY point cloud (`ply/frame_00000.ply`), for Blender and
+    /// Houdini, with the fields above as vertex properties.
+    #[serde(default)]
+    pub ply: bool,
+}
+
+/// A per-particle field a run can write into its frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+pub enum OutputField {
+    /// The density the particle's material saw in the last step (kg/m², kg/m³ in 3D).
+    #[serde(rename = "density")]
+    Density,
+    /// The pressure −tr σ / D (N/m, Pa in 3D).
+    #[serde(rename = "pressure")]
+    Pressure,
+    /// The volume ratio J = V/V⁰ (fluids ρ0/ρ; solids det F · J_p).
+    #[serde(rename = "J")]
+    J,
+    /// The Cauchy stress σ, D×D (N/m, Pa in 3D).
+    #[serde(rename = "stress")]
+    Stress,
+    /// The plastic volume ratio J_p (snow; 1 for the other materials).
+    #[serde(rename = "plastic")]
+    Plastic,
 }
 
 /// Settings of the augmented grid (`method = "augmented"`).

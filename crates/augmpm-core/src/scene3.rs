@@ -14,8 +14,8 @@ use crate::motion::{Motion3, WallPose};
 use crate::particles::Particles;
 use crate::rigid::RigidBody;
 use crate::scene::{
-    default_side, friction, inside, one, time_step, AugmentedSpec, MemoryEstimate, RigidSurfaceSpec, SceneError,
-    Seeding, SideSpec, TimeSpec, MAX_GRID_NODES, MAX_SEED_CANDIDATES,
+    default_side, friction, inside, one, time_step, AugmentedSpec, MemoryEstimate, OutputSpec, RigidSurfaceSpec,
+    SceneError, Seeding, SideSpec, TimeSpec, MAX_GRID_NODES, MAX_SEED_CANDIDATES,
 };
 use crate::simulation::{Model, Simulation};
 use crate::treatment::augmented::AugmentedGrid;
@@ -662,6 +662,9 @@ pub struct Scene3 {
     /// Floating-point precision of the engine.
     #[serde(default)]
     pub precision: Precision,
+    /// What a run writes besides positions, velocities and bodies.
+    #[serde(default)]
+    pub output: OutputSpec,
 }
 
 fn default_gravity() -> [Real; 3] {

@@ -5,7 +5,7 @@
 use crate::contact::Contacts;
 use crate::geometry::Region;
 use crate::grid::{GridLayout, GridState, OutOfGrid};
-use crate::material::{ConstitutiveModel, Material};
+use crate::material::{ConstitutiveModel, Material, MaterialPoint};
 use crate::math::{Dim, DimOps, Matrix, Real, Vector};
 use crate::motion::WallPose;
 use crate::parallel::Disjoint;
@@ -443,6 +443,17 @@ pub struct MemoryUse {
     pub particle_scratch: usize,
     /// Grid: node state, density mass, blocks, wall fractions, walls' node lists and boundary points.
     pub grid: usize,
+}
+
+/// Per-particle fields of a state for output ([`Simulation::particle_fields`]), in particle order.
+#[derive(Clone, Debug, Default)]
+pub struct ParticleFields<const D: usize> {
+    /// Cauchy stress σ (Pa, or N/m in 2D).
+    pub stress: Vec<Matrix<D>>,
+    /// Volume ratio J = V/V⁰.
+    pub volume_ratio: Vec<Real>,
+    /// Plastic volume ratio J_p (1 without plasticity).
+    pub plastic: Vec<Real>,
 }
 
 /// Diagnostics of the current state.
@@ -980,6 +991,38 @@ where
     /// (fluids: ρ0/J̄ or gathered from the regular grid), zero before the first step.
     pub fn grid_density(&self) -> &[Real] {
         &self.state.density
+    }
+
+    /// Per-particle fields of the current state, for output: each particle's Cauchy stress σ (Pa, or N/m
+    /// in 2D), its volume ratio J = V/V⁰ (fluids: ρ0/ρ with the density their stress sees; solids:
+    /// det F · J_p) and its plastic volume ratio J_p (snow; 1 for the other materials).
+    pub fn particle_fields(&self) -> ParticleFields<D> {
+        let particles = &self.state.particles;
+        let n = particles.len();
+        let mut fields =
+            ParticleFields { stress: Vec::with_capacity(n), volume_ratio: Vec::with_capacity(n), plastic: Vec::new() };
+        fields.plastic.reserve(n);
+        for p in 0..n {
+            let material = &self.model.materials[particles.body[p] as usize];
+            let point = MaterialPoint {
+                f: particles.deformation_gradient(p),
+                jp: particles.jp[p],
+                grad_v: particles.c[p],
+                mass: particles.mass[p],
+                vol0: particles.vol0[p],
+                density: self.state.density.get(p).copied().unwrap_or(0.0),
+            };
+            fields.stress.push(material.cauchy_stress(&point));
+            if ConstitutiveModel::<D>::keeps_deformation_gradient(material) {
+                fields.volume_ratio.push(Dim::<D>::det(&point.f) * point.jp);
+                fields.plastic.push(point.jp);
+            } else {
+                let rho = material.current_density(&point);
+                fields.volume_ratio.push(if rho > 0.0 { ConstitutiveModel::<D>::density(material) / rho } else { 1.0 });
+                fields.plastic.push(1.0);
+            }
+        }
+        fields
     }
 
     /// Kinetic energy and wall penetration of the current state.

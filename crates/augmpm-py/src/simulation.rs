@@ -261,6 +261,31 @@ impl PySimulation {
         guard(|| Ok(with_sim!(&self.engine, s, core => scalars_to_array(py, s.grid_density()))))
     }
 
+    /// Per-particle fields of the current state, for output: `stress`, each particle's Cauchy stress (N/m
+    /// in 2D, Pa in 3D), shape (N, D, D); `J`, its volume ratio V/V⁰ (fluids ρ0/ρ, solids det F · J_p),
+    /// and `plastic`, its plastic volume ratio J_p (snow; 1 for the other materials), shape (N,).
+    fn particle_fields<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let dim = self.dim();
+        guard(|| {
+            let d = PyDict::new(py);
+            with_sim!(&self.engine, s, core => {
+                let fields = s.particle_fields();
+                let n = fields.stress.len();
+                // Row-major D×D per particle.
+                let flat: Vec<f64> = fields
+                    .stress
+                    .iter()
+                    .flat_map(|m| (0..m.nrows()).flat_map(move |i| (0..m.ncols()).map(move |j| wide(m[(i, j)]))))
+                    .collect();
+                let stress = PyArray1::from_vec(py, flat).reshape([n, dim, dim])?;
+                d.set_item("stress", stress)?;
+                d.set_item("J", scalars_to_array(py, &fields.volume_ratio))?;
+                d.set_item("plastic", scalars_to_array(py, &fields.plastic))?;
+            });
+            Ok(d)
+        })
+    }
+
     #[getter]
     fn num_particles(&self) -> usize {
         with_sim!(&self.engine, s, core => s.particles().len())

@@ -71,6 +71,24 @@ mod tests {
         assert!((tau - Matrix2::new(txx, 0.0, 0.0, tyy)).norm() < 1e-6 * txx.abs());
     }
 
+    /// The Cauchy stress is the Kirchhoff stress over J = det F: for a uniaxial stretch s, σ = τ/s; and a
+    /// small stretch ε gives linear elasticity's σ_xx = (λ + 2μ)ε, σ_yy = λε to O(ε²) (relative 3ε).
+    #[test]
+    fn cauchy_stress_is_kirchhoff_over_j() {
+        let m = FixedCorotated { density: 1000.0, youngs_modulus: 1e6, poisson_ratio: 0.3 };
+        let (mu, lambda) = lame(1e6, 0.3);
+        for s in [1.2, 1.0 + 1e-4] {
+            let p = MaterialPoint::<2>::solid(Matrix2::new(s, 0.0, 0.0, 1.0), 1.0, 0.5);
+            let sigma = ConstitutiveModel::<2>::cauchy_stress(&m, &p);
+            assert!((sigma * s - m.volume_stress(&p) / 0.5).norm() < 1e-9 * sigma.norm());
+            if s < 1.01 {
+                let eps = s - 1.0;
+                assert!((sigma[(0, 0)] - (lambda + 2.0 * mu) * eps).abs() < 3.0 * eps * (lambda + 2.0 * mu) * eps);
+                assert!((sigma[(1, 1)] - lambda * eps).abs() < 3.0 * eps * (lambda + 2.0 * mu) * eps);
+            }
+        }
+    }
+
     /// A pure rotation carries no stress.
     #[test]
     fn rotation_is_stress_free() {

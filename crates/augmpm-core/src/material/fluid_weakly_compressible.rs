@@ -111,6 +111,13 @@ impl<const D: usize> ConstitutiveModel<D> for WeaklyCompressibleFluid {
         self.cauchy_stress(density, &p.grad_v) * volume
     }
 
+    fn cauchy_stress(&self, p: &MaterialPoint<D>) -> Matrix<D>
+    where
+        crate::math::Dim<D>: crate::math::DimOps<D>,
+    {
+        self.cauchy_stress(ConstitutiveModel::<D>::current_density(self, p), &p.grad_v)
+    }
+
     fn update_deformation(&self, _f: &mut Matrix<D>, jp: &mut Real, grad_v: &Matrix<D>, dt: Real) {
         // F is not needed; with the deformation estimate `jp` holds J, J̇ = J tr(∇v), integrated
         // exactly for the step's constant ∇v (J stays positive however large the step's divergence).
@@ -198,6 +205,19 @@ mod tests {
         let vs = f.volume_stress(&p);
         let expect = -f.pressure(1010.0) * 2.0 / 1010.0;
         assert!((vs[(0, 0)] - expect).abs() < 1e-12 && (vs[(1, 1)] - expect).abs() < 1e-12);
+    }
+
+    /// A fluid's Cauchy stress is −p I + μ(∇v + ∇vᵀ) at the density its stress sees (here ρ0/J with the
+    /// deformation estimate, J = 0.99), whatever its stress volume.
+    #[test]
+    fn cauchy_stress_is_pressure_and_viscous_stress() {
+        let f = WeaklyCompressibleFluid { density_estimate: DensityEstimate::Deformation, ..water() };
+        let grad_v = Matrix2::new(0.0, 2.0, 0.0, 0.0);
+        let p = MaterialPoint::<2> { f: Matrix2::identity(), jp: 0.99, grad_v, mass: 2.0, vol0: 0.002, density: 0.0 };
+        let sigma = ConstitutiveModel::<2>::cauchy_stress(&f, &p);
+        let pressure = f.pressure(1000.0 / 0.99);
+        let expect = Matrix2::new(-pressure, 2.0 * 2.0, 2.0 * 2.0, -pressure);
+        assert!((sigma - expect).norm() < 1e-9 * expect.norm(), "{sigma} vs {expect}");
     }
 
     /// An isolated particle (grid density ≪ ρ0) integrates its stress over at most its rest

@@ -47,6 +47,15 @@ pub trait ConstitutiveModel<const D: usize> {
     /// For hyperelastic models this is `V⁰_p τ_p` with τ the Kirchhoff stress.
     fn volume_stress(&self, p: &MaterialPoint<D>) -> Matrix<D>;
 
+    /// Cauchy stress σ (Pa, or N/m in 2D) at this point: for the hyperelastic models the Kirchhoff stress
+    /// over J = det F, `volume_stress / (V⁰ det F)`.
+    fn cauchy_stress(&self, p: &MaterialPoint<D>) -> Matrix<D>
+    where
+        Dim<D>: DimOps<D>,
+    {
+        self.volume_stress(p) / (p.vol0 * Dim::<D>::det(&p.f))
+    }
+
     /// Advances F (and J_p) over one step with velocity gradient `grad_v`.
     fn update_deformation(&self, f: &mut Matrix<D>, jp: &mut Real, grad_v: &Matrix<D>, dt: Real);
 
@@ -159,6 +168,9 @@ where
     #[inline]
     fn volume_stress(&self, p: &MaterialPoint<D>) -> Matrix<D> {
         dispatch!(self, m => m.volume_stress(p))
+    }
+    fn cauchy_stress(&self, p: &MaterialPoint<D>) -> Matrix<D> {
+        dispatch!(self, m => ConstitutiveModel::<D>::cauchy_stress(m, p))
     }
     #[inline]
     fn update_deformation(&self, f: &mut Matrix<D>, jp: &mut Real, grad_v: &Matrix<D>, dt: Real) {
