@@ -113,9 +113,21 @@ def test_same_seed_same_set_and_resumed_sets_redo_nothing(tmp_path, client):
     assert trajectory_scene(other, "train", 0) != trajectory_scene(load_spec(spec), "train", 0)
 
 
+@pytest.mark.parametrize(("resolution", "max_angle"), [(16, 45.0), (20, 45.0), (24, 30.0)])
+def test_coarse_or_turned_scenes_are_valid(tmp_path, resolution, max_angle):
+    """At the coarsest resolutions and the largest turns a spec allows, every random scene builds: its bodies
+    are clear of the walls, the engine takes it."""
+    spec = load_spec(_spec(tmp_path, f"resolution = {resolution}\nmax_angle = {max_angle}\n"))
+    for i in range(30):
+        data = trajectory_scene(spec, "train", i, dt=1e-4)
+        for b in data["bodies"]:
+            b.pop("name_")
+        augmpm.Simulation(augmpm.Scene.from_dict(data), threads=1)
+
+
 def test_random_scenes_hold_every_material_and_stay_valid(tmp_path):
     """Over many seeds the scenes draw every material, turn their containers both ways within max_angle,
-    place obstacles, and are all valid scenes (bodies clear of the walls)."""
+    place obstacles, and are all valid scenes (bodies clear of the walls: the engine builds them)."""
     spec = load_spec(_spec(tmp_path, "max_angle = 20.0\n"))
     kinds, angles, obstacles = set(), [], 0
     for i in range(40):
@@ -126,7 +138,7 @@ def test_random_scenes_hold_every_material_and_stay_valid(tmp_path):
         obstacles += len(data["walls"]) - 1
         for b in data["bodies"]:
             b.pop("name_")
-        augmpm.Scene.from_dict(data)
+        augmpm.Simulation(augmpm.Scene.from_dict(data), threads=1)
     assert kinds == set(MATERIALS)
     assert max(angles) > 5 and min(angles) < -5 and all(abs(a) <= 20.0 + 1e-9 for a in angles)
     assert obstacles > 10

@@ -35,19 +35,20 @@ def test_a_fluids_stress_is_its_equation_of_state_and_viscosity():
     np.testing.assert_allclose(fields["pressure"], -np.trace(fields["stress"], axis1=1, axis2=2) / 2, rtol=1e-14)
     np.testing.assert_allclose(fields["J"], state["jp"], rtol=2e-16)  # ρ0/(ρ0/J): one rounding each way
     np.testing.assert_array_equal(fields["plastic"], np.ones(sim.num_particles))
-    np.testing.assert_array_equal(fields["density"], sim.densities)
+    np.testing.assert_allclose(fields["density"], fluid.density / state["jp"], rtol=4e-16)  # ρ0/J, two roundings
     assert p.max() > 100.0  # the column presses on its floor: the check is not of zeros
 
 
 def test_snows_volume_ratios_are_its_deformation():
-    """For snow, J = det F · J_p and the plastic field is J_p, from the particles' own F and J_p; compressed
-    snow has J_p < 1 somewhere after it lands."""
+    """For snow, J = det F · J_p, the plastic field is J_p and the density ρ0 / J, from the particles' own F
+    and J_p; compressed snow has J_p < 1 somewhere after it lands (its stress: the core's tests)."""
     scene = augmpm.load_scene("paper/snow_incline_fullslip")
     sim = augmpm.Simulation(scene, threads=2)
     sim.step(600)
-    fields = particle_fields(sim, ["J", "plastic", "stress"])
+    fields = particle_fields(sim, ["J", "plastic", "stress", "density"])
     state = sim.checkpoint()
     np.testing.assert_allclose(fields["J"], np.linalg.det(state["f"]) * state["jp"], rtol=1e-12)
+    np.testing.assert_allclose(fields["density"], scene.bodies[0].material.density / fields["J"], rtol=1e-15)
     np.testing.assert_array_equal(fields["plastic"], state["jp"])
     assert fields["plastic"].min() < 1.0
     assert fields["stress"].shape == (sim.num_particles, 2, 2)

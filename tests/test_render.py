@@ -154,7 +154,9 @@ def test_render_run_colours_by_a_field_with_a_colour_bar(tmp_path, capsys):
     img = np.asarray(Image.open(run / "render" / "frames" / "frame_00005.png").convert("RGB"))
     assert img.shape[1] == 320
     top = field_colours(np.array([1.0]), 0.0, 1.0)[0].astype(int)
-    near_top = (np.abs(img.reshape(-1, 3).astype(int) - top) <= 12).all(axis=1).sum()
+    # The bar lies in the top right corner (below the caption): its top rows there, not particles.
+    corner = img[40:80, 320 - 120 :].reshape(-1, 3).astype(int)
+    near_top = (np.abs(corner - top) <= 12).all(axis=1).sum()
     assert near_top >= 2 * 12  # two of the bar's rows at least (13 px wide inside its outline)
     assert main(["render", str(run), "--colour-by", "pressure"]) == 2
     err = capsys.readouterr().err

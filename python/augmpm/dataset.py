@@ -38,8 +38,9 @@ from augmpm import _core
 from augmpm.files import npz_bytes, output_dir, write_bytes, write_npz, write_text
 from augmpm.scene import Scene, _plain_error
 
-#: Particle types (the numbering of the GNS sets: 3 kinematic, 5 water, 6 sand, 7 goop; then ours).
-PARTICLE_TYPES = {"wall": 3, "water": 5, "goop": 7, "elastic": 8, "snow": 9}
+#: Particle types: the GNS sets' numbers (3 kinematic, 5 water, 6 sand, 7 goop), then ours in the ids they
+#: leave free below 9 (the `gns` package embeds 9 types, 0 to 8).
+PARTICLE_TYPES = {"wall": 3, "water": 5, "goop": 7, "elastic": 8, "snow": 4}
 WALL_TYPE = PARTICLE_TYPES["wall"]
 #: The materials a set may hold, as scene materials (2D: per unit area, N/m stresses).
 MATERIALS: dict[str, dict[str, Any]] = {
@@ -186,27 +187,19 @@ def trajectory_scene(spec: DatasetSpec, split: str, index: int, dt: float | None
     taken: list[tuple[np.ndarray, float]] = []
 
     def place(radius: float, low: float, high: float) -> np.ndarray | None:
+        """A free place for a disk of ``radius`` inside the container, its centre's height in [low, high]
+        (the container's frame), or None (no draw is taken from an empty range)."""
+        low, high = max(low, -half + radius + margin), min(high, half - radius - margin)
+        if low > high or half - radius - margin < 0:
+            return None
         for _ in range(100):
             p = np.array([rng.uniform(-half + radius + margin, half - radius - margin), rng.uniform(low, high)])
-            if all(np.linalg.norm(p - q) > radius + r + 2 * margin for q, r in taken):
+            if all(np.linalg.norm(p - q) > radius + r + margin for q, r in taken):
                 taken.append((p, radius))
                 return p
         return None
 
-    for _ in range(int(rng.integers(spec.obstacles[0], spec.obstacles[1] + 1))):
-        radius = rng.uniform(0.04, 0.08)
-        p = place(radius, -half + radius + 4 * h, 0.0)
-        if p is None:
-            continue
-        where = (_rotated(p[None] + centre, -angle, centre))[0]
-        if rng.uniform() < 0.5:
-            walls.append({"type": "circle", "center": where.tolist(), "radius": float(radius)})
-        else:
-            k = int(rng.integers(3, 6))
-            turn = rng.uniform(0, 2 * math.pi)
-            corners = [[math.cos(turn + 2 * math.pi * j / k), math.sin(turn + 2 * math.pi * j / k)] for j in range(k)]
-            vertices = (np.array(corners) * radius + where).tolist()
-            walls.append({"type": "polygon", "vertices": vertices, "side": "outside"})
+    # The bodies first, so that obstacles take only the room they leave.
     bodies = []
     for _ in range(int(rng.integers(spec.bodies[0], spec.bodies[1] + 1))):
         kind = spec.materials[int(rng.integers(len(spec.materials)))]
@@ -227,9 +220,30 @@ def trajectory_scene(spec: DatasetSpec, split: str, index: int, dt: float | None
             body |= {"shape": "box", "min": (where - r).tolist(), "max": (where + r).tolist()}
         body["name_"] = kind
         bodies.append(body)
-    if not bodies:  # every place was taken: one small body of water in the middle
-        bodies.append({"material": dict(MATERIALS[spec.materials[0]]), "shape": "circle", "center": [0.5, 0.6]})
-        bodies[-1] |= {"radius": 0.05, "name_": spec.materials[0]}
+    radius = 0.06
+    while not bodies and radius >= h:  # every place was taken: smaller bodies, anywhere free
+        p = place(radius, -half, half)
+        if p is not None:
+            where = _rotated(p[None] + centre, -angle, centre)[0]
+            bodies.append({"material": dict(MATERIALS[spec.materials[0]]), "shape": "circle"})
+            bodies[-1] |= {"center": where.tolist(), "radius": radius, "name_": spec.materials[0]}
+        radius *= 0.8
+    if not bodies:
+        raise _plain_error("resolution", f"{spec.resolution} cells leave no room for a body between the walls")
+    for _ in range(int(rng.integers(spec.obstacles[0], spec.obstacles[1] + 1))):
+        radius = rng.uniform(0.04, 0.08)
+        p = place(radius, -half + radius + 4 * h, 0.0)
+        if p is None:
+            continue
+        where = (_rotated(p[None] + centre, -angle, centre))[0]
+        if rng.uniform() < 0.5:
+            walls.append({"type": "circle", "center": where.tolist(), "radius": float(radius)})
+        else:
+            k = int(rng.integers(3, 6))
+            turn = rng.uniform(0, 2 * math.pi)
+            corners = [[math.cos(turn + 2 * math.pi * j / k), math.sin(turn + 2 * math.pi * j / k)] for j in range(k)]
+            vertices = (np.array(corners) * radius + where).tolist()
+            walls.append({"type": "polygon", "vertices": vertices, "side": "outside"})
     time: dict[str, Any] = {"steps": spec.steps, "output_interval": spec.frame_interval}
     time |= {"dt": dt} if dt is not None else {"cfl": 0.25}
     return {
@@ -356,7 +370,15 @@ def make_dataset(
             }
             bar = _bar(len(todo), progress, label="dataset", unit="trajectory")
             for future in as_completed(futures):
-                rows[futures[future]] = future.result()
+                split, index = futures[future]
+                try:
+                    rows[(split, index)] = future.result()
+                except Exception as e:  # a worker lost too often, or an error outside the simulation
+                    rows[(split, index)] = {
+                        **dict.fromkeys(_COLUMNS, ""),
+                        **{"split": split, "index": index, "method": spec.method},
+                        "error": f"{type(e).__name__}: {e}",
+                    }
                 bar.update(1)
                 _write_rows(out / "trajectories.csv", [rows[t] for t in tasks if t in rows])
             bar.close()
@@ -366,8 +388,8 @@ def make_dataset(
     if failed:
         first = failed[0]
         raise _core.SimulationError(
-            f"trajectory {first['split']} {first['index']} failed ({len(failed)} in all; run again to retry them): "
-            f"{first['error']}"
+            f"trajectory {first['split']} {first['index']} failed ({len(failed)} in all; a trajectory is the same "
+            f"every time, so change the spec, e.g. its seed or max_speed, to go on): {first['error']}"
         )
     metadata = _assemble(spec, out, tasks, part, dt, ordered)
     return DatasetResult(out=out, rows=ordered, metadata=metadata)

@@ -527,6 +527,9 @@ def write_animation(frames: list[Path], path: Path, fps: int = 20) -> None:
 #: Units of the fields `augmpm render --colour-by` knows; any other per-particle array of a frame is drawn
 #: too, labelled with its name.
 FIELD_UNITS = {"speed": "m/s", "vx": "m/s", "vy": "m/s", "vz": "m/s"}
+#: Units of the output fields (`output.fields`) in 2D and in 3D.
+FIELD_UNITS_2D = {"density": "kg/m²", "pressure": "N/m", "J": "1", "plastic": "1"}
+FIELD_UNITS_3D = {"density": "kg/m³", "pressure": "Pa", "J": "1", "plastic": "1"}
 
 
 def _field(frame: Any, name: str) -> np.ndarray:
@@ -587,7 +590,7 @@ def render_run(
                 values.append(v[np.isfinite(v)])
         every = np.concatenate(values) if values else np.zeros(1)
         low, high = (float(every.min()), float(every.max())) if every.size else (0.0, 1.0)
-        unit = FIELD_UNITS.get(colour_by)
+        unit = {**FIELD_UNITS, **(FIELD_UNITS_3D if dim == 3 else FIELD_UNITS_2D)}.get(colour_by)
         bar = (f"{colour_by} ({unit})" if unit else colour_by, low, high)
     moving = [w.motion is not None for w in scene.walls] + [True] * len(getattr(scene, "rigid_bodies", []))
     walls_move = (run_dir / "walls.pvd").exists()

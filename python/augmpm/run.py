@@ -496,15 +496,17 @@ OUTPUT_FIELDS = ("density", "pressure", "J", "stress", "plastic")
 
 def particle_fields(sim: Simulation, names: list[str]) -> dict[str, np.ndarray]:
     """The fields ``names`` (of :data:`OUTPUT_FIELDS`) of the simulation's particles now: ``density``
-    (kg/m², kg/m³ in 3D: what the material saw in the last step), ``pressure`` (−tr σ / D: N/m, Pa in 3D),
-    ``J`` (V/V⁰), ``stress`` (Cauchy, (N, D, D): N/m, Pa in 3D) and ``plastic`` (J_p)."""
+    (ρ0 / J: kg/m², kg/m³ in 3D), ``pressure`` (−tr σ / D: N/m, Pa in 3D), ``J`` (V/V⁰: fluids ρ0/ρ with the
+    density their stress sees, solids det F · J_p), ``stress`` (Cauchy, (N, D, D): N/m, Pa in 3D) and
+    ``plastic`` (J_p)."""
     if not names:
         return {}
     fields = sim.particle_fields()
     out = {}
     for name in names:
         if name == "density":
-            out[name] = sim.densities
+            rest = np.array([b.material.density for b in sim.scene.bodies], dtype=float)
+            out[name] = rest[sim.body] / fields["J"]
         elif name == "pressure":
             out[name] = -np.trace(fields["stress"], axis1=1, axis2=2) / sim.dim
         else:

@@ -340,9 +340,7 @@ def _run_on_dask(
         futures = {
             client.submit(
                 run_one,
-                str(spec.scene),
-                spec.overrides,
-                runs[i],
+                load_scene(spec.scene, spec.overrides, runs[i]).to_json(),
                 str(out / "runs" / run_name(i)),
                 spec.steps,
                 spec.render,
@@ -359,7 +357,7 @@ def _run_on_dask(
             try:
                 summaries[i] = future.result()
             except Exception as e:  # a worker lost too often, or an error outside the simulation
-                summaries[i] = {"status": "error", "error": f"{type(e).__name__}: {e}", "dir": run_name(i)}
+                summaries[i] = {"status": "error", "error": f"{type(e).__name__}: {e}", "dir": f"runs/{run_name(i)}"}
             bar.update(1)
         bar.close()
     return summaries
@@ -367,17 +365,18 @@ def _run_on_dask(
 
 def run_one(
     scene: str,
-    overrides: list[str],
-    values: dict[str, Any],
     run_dir: str,
     steps: int | None,
     render: bool,
     checkpoint_every: int,
     threads: int | None,
 ) -> dict[str, Any]:
-    """One run of a sweep (on a worker): nothing when ``run_dir`` holds a finished run (its summary is
-    returned), else continued from its checkpoint, else started; writes ``summary.json`` once finished."""
+    """One run of a sweep (on a worker), of the scene ``scene`` (its JSON, meshes included: the worker reads
+    no scene file): nothing when ``run_dir`` holds a finished run (its summary is returned), else continued
+    from its checkpoint, else started; writes ``summary.json`` once finished. A scene the engine refuses is
+    a finished, failed run; an error reading the run's own files is raised (the next call tries again)."""
     from augmpm.run import CHECKPOINT, resume_run, run_scene
+    from augmpm.scene import scene_class
 
     path = Path(run_dir)
     if (path / SUMMARY).exists():
@@ -386,21 +385,24 @@ def run_one(
     resumed = (path / CHECKPOINT).exists()
     with open(path / _ATTEMPTS, "a", encoding="utf-8") as log:
         log.write(f"{wallclock.strftime('%Y-%m-%dT%H:%M:%S')} {'resumed' if resumed else 'started'}\n")
+    if resumed:
+        result = resume_run(path, progress=False, threads=threads, raise_on_failure=False)
+        summary = _summarize(path, result.error, result.wall_time)
+        write_text(path / SUMMARY, json.dumps(summary, indent=1))
+        return summary
+    data = json.loads(scene)
     try:
-        if resumed:
-            result = resume_run(path, progress=False, threads=threads, raise_on_failure=False)
-        else:
-            result = run_scene(
-                load_scene(scene, overrides, values),
-                path,
-                steps=steps,
-                progress=False,
-                animation="mp4" if render else None,
-                render=render,
-                threads=threads,
-                checkpoint_every=checkpoint_every,
-                raise_on_failure=False,
-            )
+        result = run_scene(
+            scene_class(data).model_validate(data),
+            path,
+            steps=steps,
+            progress=False,
+            animation="mp4" if render else None,
+            render=render,
+            threads=threads,
+            checkpoint_every=checkpoint_every,
+            raise_on_failure=False,
+        )
         summary = _summarize(path, result.error, result.wall_time)
     except _core.SceneError as e:
         # Refused by the engine (e.g. a body outside the walls at these values): a result of the sweep.

@@ -540,7 +540,7 @@ pub struct OutputSpec {
 /// A per-particle field a run can write into its frames.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 pub enum OutputField {
-    /// The density the particle's material saw in the last step (kg/m², kg/m³ in 3D).
+    /// The density ρ0 / J (kg/m², kg/m³ in 3D).
     #[serde(rename = "density")]
     Density,
     /// The pressure −tr σ / D (N/m, Pa in 3D).

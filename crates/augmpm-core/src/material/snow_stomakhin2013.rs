@@ -86,6 +86,11 @@ where
         kirchhoff(&p.f, mu, lambda) * p.vol0
     }
 
+    /// The Kirchhoff stress over the whole volume ratio J = det F_E · J_p (F is the elastic part).
+    fn cauchy_stress(&self, p: &MaterialPoint<D>) -> Matrix<D> {
+        self.volume_stress(p) / (p.vol0 * Dim::<D>::det(&p.f) * p.jp)
+    }
+
     fn update_deformation(&self, f: &mut Matrix<D>, jp: &mut Real, grad_v: &Matrix<D>, dt: Real) {
         advance_f(f, grad_v, dt);
         let (u, s, v) = Dim::<D>::svd(f);
@@ -126,6 +131,17 @@ mod tests {
             jp_min: 0.6,
             jp_max: 20.0,
         }
+    }
+
+    /// The Cauchy stress times the particle's current volume V⁰ det F_E J_p is the stress the step applies,
+    /// `volume_stress` (V⁰ τ), also once snow has lost volume plastically (J_p = 0.8).
+    #[test]
+    fn cauchy_stress_integrates_over_the_current_volume() {
+        let m = snow();
+        let p = MaterialPoint::<2>::solid(Matrix2::new(1.01, 0.002, 0.0, 0.995), 0.8, 0.3);
+        let volume = 0.3 * Dim::<2>::det(&p.f) * 0.8;
+        let sigma = ConstitutiveModel::<2>::cauchy_stress(&m, &p);
+        assert!((sigma * volume - m.volume_stress(&p)).norm() < 1e-12 * m.volume_stress(&p).norm());
     }
 
     /// Stretching past 1 + θs and compressing past 1 − θc leaves the elastic singular values at the clamps,
