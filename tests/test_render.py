@@ -162,3 +162,23 @@ def test_render_run_colours_by_a_field_with_a_colour_bar(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--colour-by" in err and "speed" in err
     assert main(["render", str(tmp_path / "nothing")]) == 2
+
+
+def test_render_run_draws_a_3d_run(tmp_path):
+    """A 3D run is drawn again from its files: every frame, as wide as asked, its particles in the colour
+    map's colours (coloured by vy, the field of a falling body)."""
+    import augmpm
+    from augmpm.render import render_run
+    from augmpm.run import run_scene
+
+    run = tmp_path / "run3d"
+    scene = augmpm.load_scene("paper3d/fluid_incline_noslip", ["grid.resolution=16", "time.output_interval=20"])
+    run_scene(scene, run, steps=40, progress=False, render=False, animation=None)
+    out, frames = render_run(run, size_px=256, colour_by="vy", animation="gif")
+    assert frames == 3 and (out / "animation.gif").stat().st_size > 0
+    img = np.asarray(Image.open(out / "frames" / "frame_00002.png").convert("RGB"))
+    assert img.shape[1] == 256
+    # Coloured pixels outside the colour bar's box (the walls, box and caption are grey): the particles.
+    coloured = np.ptp(img.astype(int), axis=2) > 20
+    coloured[:160, 256 - 110 :] = False
+    assert coloured.sum() > 50
