@@ -41,3 +41,16 @@ def write_scene(tmp_path):
         return path
 
     return write
+
+
+@pytest.fixture(scope="session")
+def client():
+    """A local Dask cluster of 2 worker processes, one thread each, shared by the sweep and dataset tests."""
+    import distributed
+
+    cluster = distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40
+    )
+    with distributed.Client(cluster) as c:
+        yield c
+    cluster.close()

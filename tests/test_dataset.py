@@ -8,7 +8,6 @@ import json
 import math
 from pathlib import Path
 
-import distributed
 import numpy as np
 import pytest
 
@@ -32,16 +31,6 @@ resolution = 24
 steps = 60
 frame_interval = 10
 """
-
-
-@pytest.fixture(scope="module")
-def client():
-    cluster = distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40
-    )
-    with distributed.Client(cluster) as c:
-        yield c
-    cluster.close()
 
 
 def _spec(tmp_path: Path, text: str, name: str = "dataset.toml") -> Path:

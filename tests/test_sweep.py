@@ -11,7 +11,6 @@ import threading
 import time
 from pathlib import Path
 
-import distributed
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
@@ -42,16 +41,6 @@ def _spec(tmp_path: Path, text: str, name: str = "spec.toml") -> Path:
     path = tmp_path / name
     path.write_text(text, encoding="utf-8")
     return path
-
-
-@pytest.fixture(scope="module")
-def client():
-    cluster = distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40
-    )
-    with distributed.Client(cluster) as c:
-        yield c
-    cluster.close()
 
 
 def _same_outputs(a: Path, b: Path) -> None:

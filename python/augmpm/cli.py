@@ -241,27 +241,28 @@ def _validate(args: argparse.Namespace) -> int:
     return EXIT_OK if all_augmented_pass(records) else EXIT_FAILED_RUN
 
 
-def _sweep(args: argparse.Namespace) -> int:
-    from augmpm.sweep import format_summary, load_spec, run_sweep
-
+def _on_dask(args: argparse.Namespace, load_spec, make, format_summary):
+    """Reads SPEC, runs ``make`` (a sweep or a dataset) on Dask into ``--out`` and prints its summary."""
     if args.workers is not None and args.scheduler is not None:
         raise _core.SceneError("--workers: sizes the local cluster; not with --scheduler")
     spec = load_spec(args.spec)
     out = _output_dir(args.out or Path("runs") / args.spec.stem)
-    result = run_sweep(spec, out, scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress)
+    result = make(spec, out, scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress)
     print(format_summary(result))
+    return result
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from augmpm import sweep
+
+    result = _on_dask(args, sweep.load_spec, sweep.run_sweep, sweep.format_summary)
     return EXIT_FAILED_RUN if result.counts()["error"] else EXIT_OK
 
 
 def _dataset(args: argparse.Namespace) -> int:
-    from augmpm.dataset import format_summary, load_spec, make_dataset
+    from augmpm import dataset
 
-    if args.workers is not None and args.scheduler is not None:
-        raise _core.SceneError("--workers: sizes the local cluster; not with --scheduler")
-    spec = load_spec(args.spec)
-    out = _output_dir(args.out or Path("runs") / args.spec.stem)
-    result = make_dataset(spec, out, scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress)
-    print(format_summary(result))
+    _on_dask(args, dataset.load_spec, dataset.make_dataset, dataset.format_summary)
     return EXIT_OK
 
 
