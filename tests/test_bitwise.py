@@ -16,7 +16,7 @@ import pytest
 
 import augmpm
 from augmpm import bench
-from augmpm.validation import channel, dam_break, hydrostatic, incline, rotation
+from augmpm.validation import channel, dam_break, granular, hydrostatic, incline, rotation
 
 from .conftest import SCENES
 
@@ -57,9 +57,11 @@ VALIDATION_SCENES: dict[str, Callable[[], dict]] = {
     },
     "rotation_fullslip": lambda: rotation._scene("slip", 64),
     "rotation_noslip": lambda: rotation._scene("sticky", 64),
+    "granular_column": lambda: granular.column_scene(1.0, 16, 30.0)[0],
 }
 #: (case, method): digests as above after VALIDATION_STEPS steps (recorded 2026-12-01 with the build of
-#: f17a8f1, before the scene schema and the restructuring of issue 12).
+#: f17a8f1, before the scene schema and the restructuring of issue 12; the sand column's on 2026-12-03 at the
+#: commit that added sand).
 VALIDATION_DIGESTS: dict[tuple[str, str], str] = {
     ("poiseuille", "naive"): "fa6ee5f3be2c3275",
     ("poiseuille", "augmented"): "12bd30211da6af58",
@@ -79,6 +81,8 @@ VALIDATION_DIGESTS: dict[tuple[str, str], str] = {
     ("rotation_fullslip", "augmented"): "ff32311c86b991f6",
     ("rotation_noslip", "naive"): "389940774c7129da",
     ("rotation_noslip", "augmented"): "3c02485bab41908e",
+    ("granular_column", "naive"): "5c57d5807e0c6c81",
+    ("granular_column", "augmented"): "56ff3a24f830b6bd",
 }
 VALIDATION_STEPS = 300
 

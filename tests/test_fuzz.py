@@ -172,6 +172,19 @@ shape = "circle"
 center = [0.9, 0.3]
 radius = 0.12
 material = {type = "fluid", density = 1000.0, stiffness = 1e4}
+
+[[bodies]]
+shape = "box"
+min = [1.65, 0.1]
+max = [1.9, 0.5]
+
+[bodies.material]
+type = "sand"
+density = 2200.0
+youngs_modulus = 2e5
+poisson_ratio = 0.3
+friction_angle = 35.0
+cohesion = 50.0
 """)
 
 _TANK3D = tomllib.loads("""
@@ -249,7 +262,7 @@ SPECIAL_NUMBERS = [
     3.5e38, 2**31, 2**32, 2**63 - 1, 2**63, 2**64, -(2**63), 2**70,
 ]  # fmt: skip
 TAGS = [
-    "polygon", "circle", "box", "fluid", "elastic", "stvk", "snow", "sticky", "slip", "separate", "inside",
+    "polygon", "circle", "box", "fluid", "elastic", "stvk", "snow", "sand", "sticky", "slip", "separate", "inside",
     "outside", "f32", "f64", "", "Polygon", "FLUID",
 ]  # fmt: skip
 WRONG_TYPES = [

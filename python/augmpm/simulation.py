@@ -103,7 +103,8 @@ class Simulation:
     def particle_fields(self) -> dict[str, np.ndarray]:
         """Per-particle fields of the current state: ``stress`` (N, D, D), each particle's Cauchy stress
         (N/m in 2D, Pa in 3D); ``J`` (N,), its volume ratio V/V⁰ (fluids ρ0/ρ, solids det F · J_p);
-        ``plastic`` (N,), its plastic volume ratio J_p (snow; 1 for the other materials)."""
+        ``plastic`` (N,), its plastic volume ratio J_p (snow; sand: its loose volume, ≥ 1; 1 for the other
+        materials)."""
         return self._sim.particle_fields()
 
     @property

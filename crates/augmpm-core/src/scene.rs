@@ -552,7 +552,7 @@ pub enum OutputField {
     /// The Cauchy stress σ, D×D (N/m, Pa in 3D).
     #[serde(rename = "stress")]
     Stress,
-    /// The plastic volume ratio J_p (snow; 1 for the other materials).
+    /// The plastic volume ratio J_p (snow; sand: its loose volume, ≥ 1; 1 for the other materials).
     #[serde(rename = "plastic")]
     Plastic,
 }

@@ -995,7 +995,7 @@ where
 
     /// Per-particle fields of the current state, for output: each particle's Cauchy stress σ (Pa, or N/m
     /// in 2D), its volume ratio J = V/V⁰ (fluids: ρ0/ρ with the density their stress sees; solids:
-    /// det F · J_p) and its plastic volume ratio J_p (snow; 1 for the other materials).
+    /// det F · J_p) and its plastic volume ratio J_p (snow; sand: its loose volume, ≥ 1; 1 for the other materials).
     pub fn particle_fields(&self) -> ParticleFields<D> {
         let particles = &self.state.particles;
         let n = particles.len();

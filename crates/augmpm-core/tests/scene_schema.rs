@@ -136,7 +136,7 @@ fn errors_name_the_dotted_key() {
         (
             "/bodies/0/material/type",
             Some(json!("lava")),
-            "bodies[0].material.type: must be one of \"fluid\", \"elastic\", \"stvk\", \"snow\", got \"lava\"",
+            "bodies[0].material.type: must be one of \"fluid\", \"elastic\", \"stvk\", \"snow\", \"sand\", got \"lava\"",
         ),
         ("/bodies/0/material/stiffness", Some(json!(1.0)), "bodies[0].material.stiffness: unknown key"),
         ("/bodies/0/radius", Some(json!(1.0)), "bodies[0].radius: unknown key"),

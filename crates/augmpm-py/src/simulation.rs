@@ -263,7 +263,7 @@ impl PySimulation {
 
     /// Per-particle fields of the current state, for output: `stress`, each particle's Cauchy stress (N/m
     /// in 2D, Pa in 3D), shape (N, D, D); `J`, its volume ratio V/V⁰ (fluids ρ0/ρ, solids det F · J_p),
-    /// and `plastic`, its plastic volume ratio J_p (snow; 1 for the other materials), shape (N,).
+    /// and `plastic`, its plastic volume ratio J_p (snow; sand: its loose volume, ≥ 1; 1 for the other materials), shape (N,).
     fn particle_fields<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let dim = self.dim();
         guard(|| {

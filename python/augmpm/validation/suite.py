@@ -16,6 +16,7 @@ from augmpm.validation import (
     channel,
     dam_break,
     film3d,
+    granular,
     hydrostatic,
     hydrostatic3d,
     incline,
@@ -87,6 +88,32 @@ def _plot_simple(out: Path, name: str, draw: Callable) -> str:
     fig.tight_layout()
     save_png(fig, out / name)
     return name
+
+
+def _plot_sand(data: dict, out: Path) -> str:
+    """The collapsed columns' deposits and the heaps' surfaces against the friction angle's slope."""
+    plt = _plt()
+    fig, (left, right) = plt.subplots(2, 1, figsize=(8, 7))
+    for (method, aspect, angle), (s, top) in data["column"].items():
+        style = "-" if angle == 0.0 else "--"
+        left.plot(s, top, style, color=COLOURS[method], lw=1, label=f"{method}, a = {aspect:g}, {angle:g}°")
+    for aspect in sorted({a for _, a, _ in data["column"]}):
+        lo, hi = (1.0 + r * aspect for r in granular.RUNOUT_RANGE)
+        left.axvspan(lo, hi, color="0.9", zorder=0)
+    left.set(xlabel="along the floor / L (grey: the experiments' run-outs)", ylabel="height / L", aspect="equal",
+             title="Collapsed columns' surfaces")  # fmt: skip
+    left.legend(fontsize=7, loc="upper right")
+    for (method, angle), (s, top) in data["heap"].items():
+        right.plot(s, top, "-", color=COLOURS[method], lw=1, label=f"{method} {angle:g}°")
+    s = np.linspace(-0.3, 0.3, 61)
+    slope = np.tan(np.radians(granular.PHI))
+    label = f"{granular.PHI:g}° from the orifice"
+    right.plot(s, granular.ORIFICE_HEIGHT - slope * np.abs(s), "k--", lw=0.8, label=label)
+    right.set(xlabel="along the floor (m)", ylabel="height (m)", aspect="equal", title="Poured heaps' surfaces")
+    right.legend(fontsize=7, loc="lower center")
+    fig.tight_layout()
+    save_png(fig, out / "granular.png")
+    return "granular.png"
 
 
 def run_validation(out: Path, quick: bool = False, progress: bool = True) -> list[Record]:
@@ -225,6 +252,10 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
         ax.set(xlabel="T = t sqrt(2g/a)", ylabel="Z = x/a", xlim=(0, 5.5), ylim=(1, 7), title="Dam break surge front")
 
     plots.append(("Dam break", _plot_simple(out, "dam_break.png", draw_dam)))
+
+    gran = stage("sand: a collapsing column and a poured heap", lambda: granular.run(quick))
+
+    plots.append(("Sand", _plot_sand(gran, out)))
 
     def draw_interpolation(results: dict, curved: str, title: str) -> Callable:
         """RMS errors against resolution: the curved wall's field and the plane's at 30°, per method."""

@@ -4,11 +4,13 @@
 
 mod fixed_corotated;
 mod fluid_weakly_compressible;
+mod sand_klar2016;
 mod snow_stomakhin2013;
 mod stvk;
 
 pub use fixed_corotated::FixedCorotated;
 pub use fluid_weakly_compressible::{DensityEstimate, WeaklyCompressibleFluid};
+pub use sand_klar2016::SandKlar2016;
 pub use snow_stomakhin2013::SnowStomakhin2013;
 pub use stvk::StVenantKirchhoff;
 
@@ -127,6 +129,9 @@ pub enum Material {
     /// Snow: fixed-corotated with clamped singular values and hardening (Stomakhin et al. 2013).
     #[schemars(title = "Snow")]
     Snow(SnowStomakhin2013),
+    /// Sand: Drucker–Prager plasticity with a friction angle and optional cohesion (Klár et al. 2016).
+    #[schemars(title = "Sand")]
+    Sand(SandKlar2016),
 }
 
 impl Material {
@@ -137,6 +142,7 @@ impl Material {
             Material::Elastic(_) => "elastic",
             Material::Stvk(_) => "stvk",
             Material::Snow(_) => "snow",
+            Material::Sand(_) => "sand",
         }
     }
 
@@ -157,6 +163,7 @@ macro_rules! dispatch {
             Material::Elastic($m) => $e,
             Material::Stvk($m) => $e,
             Material::Snow($m) => $e,
+            Material::Sand($m) => $e,
         }
     };
 }
