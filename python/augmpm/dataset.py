@@ -2,7 +2,7 @@
 
 Each trajectory is a random 2D scene in the unit box: a square container turned by a random angle,
 round and polygonal obstacles at random angles inside it, and bodies of water, goop (a viscous fluid),
-elastic material and snow at random places with random velocities. It is simulated with the spec's wall
+elastic material, snow and sand at random places with random velocities. It is simulated with the spec's wall
 method and written as the GNS family reads its data (Sanchez-Gonzalez et al. 2020; the `gns` package):
 
 - ``train.npz``, ``valid.npz``, ``test.npz``: ``simulation_trajectory_<i>`` → an object array
@@ -40,7 +40,7 @@ from augmpm.scene import Scene, _plain_error
 
 #: Particle types: the GNS sets' numbers (3 kinematic, 5 water, 6 sand, 7 goop), then ours in the ids they
 #: leave free below 9 (the `gns` package embeds 9 types, 0 to 8).
-PARTICLE_TYPES = {"wall": 3, "water": 5, "goop": 7, "elastic": 8, "snow": 4}
+PARTICLE_TYPES = {"wall": 3, "water": 5, "goop": 7, "elastic": 8, "snow": 4, "sand": 6}
 WALL_TYPE = PARTICLE_TYPES["wall"]
 #: The materials a set may hold, as scene materials (2D: per unit area, N/m stresses).
 MATERIALS: dict[str, dict[str, Any]] = {
@@ -48,6 +48,7 @@ MATERIALS: dict[str, dict[str, Any]] = {
     "goop": {"type": "fluid", "density": 1000.0, "stiffness": 2.0e4, "gamma": 7.0, "viscosity": 20.0},
     "elastic": {"type": "elastic", "density": 1000.0, "youngs_modulus": 4.0e4, "poisson_ratio": 0.3},
     "snow": {"type": "snow", "density": 400.0, "youngs_modulus": 4.0e4, "poisson_ratio": 0.2},
+    "sand": {"type": "sand", "density": 2200.0, "youngs_modulus": 2.0e5, "poisson_ratio": 0.3, "friction_angle": 30.0},
 }
 SPLITS = ("train", "valid", "test")
 _SPEC_KEYS = {
