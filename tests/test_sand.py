@@ -36,8 +36,9 @@ def _cut(cohesion: float) -> tuple[dict, Frame]:
 def test_cohesion_holds_a_vertical_cut_up_to_its_critical_height(factor, stands):
     """A vertical cut in a Mohr–Coulomb material stands up to H_c ≈ 3.8 (c/ρg) tan(45° + φ/2) (the limit
     analysis bounds are 3.64 and 3.83). A 0.1 m block whose cohesion makes H_c twice its height keeps its
-    top (it sinks by less than 5% of its height in 0.4 s: elastic settling is ρgH/E ≈ 0.6%), and one whose
-    H_c is half its height slumps (its top falls by more than 20%). Walls at 20° to the grid, augmented."""
+    top (it sinks by less than 5% of its height in 0.4 s: 0.5% measured, of which elastic settling under
+    its own weight, ρgH/2E, is 0.3%), and one whose H_c is half its height slumps (its top falls by more
+    than 20%: 34% measured). Walls at 20° to the grid, augmented."""
     cohesion = factor * 0.1 * RHO * G / (3.8 * math.tan(math.radians(45.0 + PHI / 2)))
     scene, frame = _cut(cohesion)
     (top,), sim = simulate(scene, "augmented", [0.4], lambda sim: float(np.max(frame.coords(sim.positions)[1])))
@@ -48,9 +49,10 @@ def test_cohesion_holds_a_vertical_cut_up_to_its_critical_height(factor, stands)
 
 def test_a_3d_sand_column_spreads_and_comes_to_rest_inside_a_turned_box():
     """In 3D (the cone through Mohr–Coulomb's compression corners), a cylinder of cohesionless sand as high as
-    it is wide, in a box turned 0.4 rad about (1, 2, 0.5) with slip walls and gravity along −y, spreads (its
-    footprint's radius grows by more than a quarter) and comes to rest (largest speed under 0.05 m/s after
-    0.8 s, against a free-fall speed √(2gH) = 1.4 m/s), with no particle outside the box."""
+    it is wide, in a box turned 0.4 rad about (1, 2, 0.5) (its floor tilted ~11°) with separate walls of
+    friction μ = tan 30° and gravity along −y, spreads (its footprint's radius grows by more than a quarter:
+    2.7× measured, at 20 cells) and comes to rest (largest speed under 0.05 m/s after 0.8 s: 0.013 measured,
+    against a free-fall speed √(2gH) = 2.0 m/s), with no particle outside the box."""
     material = {"type": "sand", "density": RHO, "youngs_modulus": 3.537e5, "poisson_ratio": 0.3, "friction_angle": PHI}
     scene = augmpm.Scene3.from_dict(
         {
@@ -79,7 +81,7 @@ def test_a_3d_sand_column_spreads_and_comes_to_rest_inside_a_turned_box():
     r0 = radius(sim.positions)
     sim.step(max(1, round(0.8 / sim.dt)))
     assert radius(sim.positions) > 1.25 * r0
-    assert float(np.abs(sim.velocities).max()) < 0.05
+    assert float(np.linalg.norm(sim.velocities, axis=1).max()) < 0.05
     assert sim.metrics()["n_outside"] == 0
 
 

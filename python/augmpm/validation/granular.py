@@ -5,9 +5,11 @@
   linear regime (a below 1.8–2.8), λa with λ between 1.2 and 1.8: the coefficients of Lube et al. 2005
   (sand, rice, sugar) and Lajeunesse et al. 2005 (glass beads), as compiled by Lagrée, Staron & Popinet
   2011 (J. Fluid Mech. 686, eq. (3.1)). Judged: λ = ΔL/(aL) within that range. L∞ is the deposit's toe:
-  the farthest point, counted from the back wall without a gap, where the deposit is at least h/2 thick
-  (the particles that run ahead alone, a film thinner than half a cell, do not count).
-- ``granular_heap``: sand drains from a hopper (slip walls, an orifice of 5 cells) onto a floor and piles
+  the farthest point, counted from the back wall without a gap, where the deposit's highest particle is
+  at least h/2 above the floor (a single layer of particles, 4 per cell, has its centres at h/4: the
+  particles that run ahead in one layer do not count).
+- ``granular_heap``: sand drains from a hopper (slip walls, an orifice of 0.04 m: 5 cells at 128 cells,
+  3.8 at 96) onto a floor and piles
   up until the heap closes the orifice. A cohesionless slope stands up to the friction angle φ (the
   infinite-slope limit of Mohr–Coulomb, which the 2D cone is exactly): judged, the heap's slope within 2°
   of φ — a straight line fitted to the heap's surface between 15% and 85% of its height, on each side,
@@ -25,12 +27,14 @@ import numpy as np
 from augmpm.validation.common import METHODS, CaseFailed, Frame, simulate
 from augmpm.validation.records import Record
 
+#: Gravity (m/s²) and the sand's friction angle (degrees).
 G = 9.81
-#: The sand of both cases: Klár et al. 2016's density and stiffness (ρ = 2200 kg/m², E = 3.537e5 N/m, ν = 0.3).
 PHI = 30.0
 
 
 def sand(friction_angle: float = PHI) -> dict:
+    """The sand of both cases: Klár et al. 2016's density and stiffness (ρ = 2200 kg/m², E = 3.537e5 N/m,
+    ν = 0.3), cohesionless."""
     return {
         "type": "sand",
         "density": 2200.0,
@@ -40,7 +44,8 @@ def sand(friction_angle: float = PHI) -> dict:
     }
 
 
-#: The column's width (m), and the published range of the run-out coefficient λ in ΔL/L = λa (a ≲ 1.8).
+#: The column's width (m), and the published range of the run-out coefficient λ in ΔL/L = λa (a below
+#: 1.8–2.8).
 COLUMN_WIDTH = 0.1
 RUNOUT_RANGE = (1.2, 1.8)
 
@@ -103,7 +108,7 @@ HOPPER = 0.27
 def heap_scene(resolution: int, angle: float, friction_angle: float = PHI) -> tuple[dict, Frame]:
     """Sand in a hopper above the middle of a floor; `Frame` coordinates: along the floor from the
     orifice's axis, and up from the floor (m)."""
-    # Raised so that the floor stays in the grid when turned (its ends, 0.3 m either way, by up to 0.15 m).
+    # Raised so that the floor stays in the grid when turned (its ends, 0.35 m either way, drop 0.175 m at 30°).
     frame = Frame((0.5, 0.2), angle)
     g = -G * frame.n
     w, oy, thick = ORIFICE / 2, ORIFICE_HEIGHT, 0.03
@@ -188,8 +193,9 @@ def run(quick: bool) -> tuple[list[Record], dict]:
                     Record(case, method, angle, cells, "particles_outside_end", sim.metrics()["n_outside"], None),
                 ]
                 data["column"][(method, aspect, angle)] = surface(s / COLUMN_WIDTH, y / COLUMN_WIDTH, 1.0 / cells)
-    # The heap is 0.14 m high: 13 cells at 96, 18 at 128 (the slope measured at 64 cells was 34–38°, at 96
-    # 30–31° and at 128 28.5°, with φ = 30°). The quick run does the augmented grid only.
+    # The heap is 0.14 m high: 13 cells at 96, 18 at 128. With φ = 30° its slope came out at 34–38° at 64
+    # cells, 30–31° at 96 and 28.5–29.5° at 128: it falls with refinement, and the 2° holds at these two.
+    # The quick run does the augmented grid only.
     resolution = 96 if quick else 128
     duration = 6.0
     for angle in angles:

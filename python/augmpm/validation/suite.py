@@ -93,24 +93,24 @@ def _plot_simple(out: Path, name: str, draw: Callable) -> str:
 def _plot_sand(data: dict, out: Path) -> str:
     """The collapsed columns' deposits and the heaps' surfaces against the friction angle's slope."""
     plt = _plt()
-    fig, (left, right) = plt.subplots(2, 1, figsize=(8, 7))
-    for (method, aspect, angle), (s, top) in data["column"].items():
+    fig, (columns, heaps) = plt.subplots(2, 1, figsize=(8, 7))
+    for (method, aspect, angle), (s, surface) in data["column"].items():
         style = "-" if angle == 0.0 else "--"
-        left.plot(s, top, style, color=COLOURS[method], lw=1, label=f"{method}, a = {aspect:g}, {angle:g}°")
+        columns.plot(s, surface, style, color=COLOURS[method], lw=1, label=f"{method}, a = {aspect:g}, {angle:g}°")
     for aspect in sorted({a for _, a, _ in data["column"]}):
         lo, hi = (1.0 + r * aspect for r in granular.RUNOUT_RANGE)
-        left.axvspan(lo, hi, color="0.9", zorder=0)
-    left.set(xlabel="along the floor / L (grey: the experiments' run-outs)", ylabel="height / L", aspect="equal",
-             title="Collapsed columns' surfaces")  # fmt: skip
-    left.legend(fontsize=7, loc="upper right")
-    for (method, angle), (s, top) in data["heap"].items():
-        right.plot(s, top, "-", color=COLOURS[method], lw=1, label=f"{method} {angle:g}°")
+        columns.axvspan(lo, hi, color="0.9", zorder=0)
+    xlabel = "along the floor / L (grey: the experiments' run-outs)"
+    columns.set(xlabel=xlabel, ylabel="height / L", aspect="equal", title="Collapsed columns' surfaces")
+    columns.legend(fontsize=7, loc="upper right")
+    for (method, angle), (s, surface) in data["heap"].items():
+        heaps.plot(s, surface, "-", color=COLOURS[method], lw=1, label=f"{method} {angle:g}°")
     s = np.linspace(-0.3, 0.3, 61)
     slope = np.tan(np.radians(granular.PHI))
     label = f"{granular.PHI:g}° from the orifice"
-    right.plot(s, granular.ORIFICE_HEIGHT - slope * np.abs(s), "k--", lw=0.8, label=label)
-    right.set(xlabel="along the floor (m)", ylabel="height (m)", aspect="equal", title="Poured heaps' surfaces")
-    right.legend(fontsize=7, loc="lower center")
+    heaps.plot(s, granular.ORIFICE_HEIGHT - slope * np.abs(s), "k--", lw=0.8, label=label)
+    heaps.set(xlabel="along the floor (m)", ylabel="height (m)", aspect="equal", title="Poured heaps' surfaces")
+    heaps.legend(fontsize=7, loc="lower center")
     fig.tight_layout()
     save_png(fig, out / "granular.png")
     return "granular.png"

@@ -1,13 +1,14 @@
 //! Sand: Drucker–Prager elastoplasticity of Klár et al. 2016 ("Drucker–Prager elastoplasticity for
-//! sand animation", SIGGRAPH 2016), with the volume correction of its §7.3 and an optional cohesion.
+//! sand animation", SIGGRAPH 2016), with its volume correction and an optional cohesion.
 //!
 //! The elastic part is St. Venant–Kirchhoff in the Hencky (logarithmic) strain ε = ln Σ of the elastic
 //! deformation gradient F_E = U Σ Vᵀ: Kirchhoff stress τ = U (2μ ε + λ tr(ε) I) Uᵀ. Each step the
 //! trial strain is returned to the yield cone ‖τ̂‖ + α (tr τ − D c cot φ) ≤ 0 (τ̂ the deviatoric part,
-//! φ the friction angle, c the cohesion) along the deviatoric direction, which keeps the volume; a state
-//! past the cone's apex (the sand pulled apart) goes to the apex, and the volume it gained is kept in
-//! J_p, the sand's loose volume, which a later compression takes back before the sand pushes (the
-//! volume correction: sand that falls apart and lands again does not swell).
+//! φ the friction angle, c the cohesion) along the deviatoric direction, which keeps the volume. A state
+//! past the cone's apex (the sand pulled apart) comes apart: stress-free, and the volume it gained is
+//! kept in J_p, the sand's loose volume, which a later compression takes back before the sand pushes
+//! (the volume correction: sand that falls apart and lands again does not swell). Loose sand has no
+//! cohesion until it is packed again.
 
 use super::{advance_f, elastic_dt, lame, ConstitutiveModel, MaterialPoint};
 use crate::math::{Dim, DimOps, Matrix, Real, Vector};
@@ -27,24 +28,40 @@ pub struct SandKlar2016 {
     /// Poisson's ratio ν.
     #[schemars(extend("exclusiveMinimum" = -1.0, "exclusiveMaximum" = 0.5, "unit" = "1"))]
     pub poisson_ratio: Real,
-    /// Internal friction angle φ (degrees): a cohesionless slope stands up to this angle. In 2D the cone is
-    /// Mohr–Coulomb's (α = sin φ / √2); in 3D it passes through Mohr–Coulomb's compression corners
-    /// (α = √(2/3) · 2 sin φ / (3 − sin φ), Klár et al. 2016).
+    /// Internal friction angle φ (degrees). In 2D the cone is Mohr–Coulomb's (α = sin φ / √2): a cohesionless
+    /// slope stands up to φ. In 3D it passes through Mohr–Coulomb's compression corners (α = √(2/3) · 2 sin φ /
+    /// (3 − sin φ), Klár et al. 2016) and is stronger than Mohr–Coulomb between them.
     #[schemars(extend("exclusiveMinimum" = 0.0, "exclusiveMaximum" = 90.0, "unit" = "deg"))]
     pub friction_angle: Real,
     /// Cohesion c (a stress: N/m in 2D, Pa in 3D): the shear strength at zero pressure. With c > 0 the sand
-    /// bears a mean tension up to c cot φ before it comes apart.
+    /// bears a mean tension up to c cot φ; pulled past it, it comes apart (stress-free, and without cohesion
+    /// until it is packed again).
     #[serde(default)]
     #[schemars(extend("minimum" = 0.0, "unit" = "N/m"))]
     pub cohesion: Real,
 }
 
-/// Singular values of a trial F_E are floored here before their logarithm (an element turned inside out
-/// in one step reads as compressed a thousandfold, which the return mapping then handles).
+/// Singular values of F_E are floored here before their logarithm: one step may compress the sand at most
+/// a thousandfold along an axis (ε ≥ −6.9), so that a step far beyond the stable one gives a large finite
+/// stress, never an infinite one.
 const MIN_STRETCH: Real = 1e-3;
+
+/// ln of a singular value, floored at [`MIN_STRETCH`]; NaN stays NaN (the step reports it).
+#[inline]
+fn ln_stretch(x: Real) -> Real {
+    if x.is_nan() {
+        x
+    } else {
+        x.max(MIN_STRETCH).ln()
+    }
+}
 
 impl SandKlar2016 {
     /// The cone's slope α in ‖τ̂‖ + α tr τ ≤ const, for D dimensions.
+    ///
+    /// In 2D, with principal stresses σ1, σ2 (tension positive), ‖τ̂‖ = |σ1 − σ2| / √2 and tr τ = σ1 + σ2,
+    /// so Mohr–Coulomb's |σ1 − σ2| / 2 ≤ c cos φ − (σ1 + σ2) / 2 · sin φ is exactly
+    /// ‖τ̂‖ + (sin φ / √2)(tr τ − 2 c cot φ) ≤ 0.
     pub fn cone_slope(&self, dim: usize) -> Real {
         let s = self.friction_angle.to_radians().sin();
         if dim == 2 {
@@ -63,22 +80,24 @@ impl SandKlar2016 {
         d * self.cohesion / self.friction_angle.to_radians().tan() / (d * lambda + 2.0 * mu)
     }
 
-    /// The return mapping of Klár et al. 2016 (§7) on the principal Hencky strains `eps` of a trial
-    /// F_E whose loose volume is `ln_jp` = ln J_p: the strains after plasticity and the new ln J_p.
+    /// The return mapping of Klár et al. 2016 on the principal Hencky strains `eps` of a trial F_E whose
+    /// loose volume is `ln_jp` = ln J_p ≥ 0: the strains after plasticity and the new ln J_p.
     pub fn project<const D: usize>(&self, eps: &Vector<D>, ln_jp: Real) -> (Vector<D>, Real) {
         let (mu, lambda) = lame(self.youngs_modulus, self.poisson_ratio);
         let d = D as Real;
-        let apex = self.apex_trace(D, mu, lambda);
+        // Loose sand has come apart: no cohesion until it is packed again.
+        let apex = if ln_jp > 0.0 { 0.0 } else { self.apex_trace(D, mu, lambda) };
         // The loose volume counts first: compression takes it back before the sand is strained.
         let trace = eps.sum() + ln_jp;
         if trace >= apex {
-            // Pulled apart past the apex: stress-free at the apex, the rest of the volume is loose.
-            return (Vector::<D>::repeat(apex / d), trace - apex);
+            // Pulled apart past the apex: stress-free, the whole volume gained is loose.
+            return (Vector::<D>::zeros(), trace);
         }
         let eps = eps.add_scalar(ln_jp / d);
         let dev = eps.add_scalar(-trace / d);
         let dev_norm = dev.norm();
-        // How far outside the cone the trial state lies, as a deviatoric strain (≤ 0: inside).
+        // How far outside the cone the trial state lies, as a deviatoric strain (≤ 0: inside; then
+        // dev_norm = 0 never reaches the division).
         let excess = dev_norm + (d * lambda + 2.0 * mu) / (2.0 * mu) * (trace - apex) * self.cone_slope(D);
         if excess <= 0.0 {
             (eps, 0.0)
@@ -96,7 +115,7 @@ where
     fn volume_stress(&self, p: &MaterialPoint<D>) -> Matrix<D> {
         let (mu, lambda) = lame(self.youngs_modulus, self.poisson_ratio);
         let (u, s, _) = Dim::<D>::svd(&p.f);
-        let eps = s.map(|x| x.max(MIN_STRETCH).ln());
+        let eps = s.map(ln_stretch);
         let principal = eps * (2.0 * mu) + Vector::<D>::repeat(lambda * eps.sum());
         u * Matrix::<D>::from_diagonal(&principal) * u.transpose() * p.vol0
     }
@@ -106,10 +125,20 @@ where
         self.volume_stress(p) / (p.vol0 * Dim::<D>::det(&p.f) * p.jp)
     }
 
+    /// A trial F_E turned inside out (det ≤ 0: one step far beyond the stable one) has no strain to return:
+    /// it is reset to F_E = I, stress-free, and the step's change of volume is lost. A non-finite F is left
+    /// as it is, for the step to report.
     fn update_deformation(&self, f: &mut Matrix<D>, jp: &mut Real, grad_v: &Matrix<D>, dt: Real) {
         advance_f(f, grad_v, dt);
+        if !f.iter().all(|x| x.is_finite()) {
+            return;
+        }
         let (u, s, v) = Dim::<D>::svd(f);
-        let eps = s.map(|x| x.max(MIN_STRETCH).ln());
+        if s[D - 1] <= 0.0 {
+            *f = Matrix::<D>::identity();
+            return;
+        }
+        let eps = s.map(ln_stretch);
         let (eps, ln_jp) = self.project(&eps, jp.ln());
         *jp = ln_jp.exp();
         *f = u * Matrix::<D>::from_diagonal(&eps.map(Real::exp)) * v.transpose();
@@ -197,19 +226,52 @@ mod tests {
         assert!(m.volume_stress(&p).norm() < 1e-6);
     }
 
-    /// With cohesion c the sand bears an isotropic tension up to the apex, mean stress c cot φ, and no
-    /// more: pulled past it, its stress is that tension (to 1e-9 relative).
+    /// With cohesion c the sand bears an isotropic tension up to the apex, mean stress c cot φ (to 1e-9
+    /// relative just inside it); pulled past it, it comes apart: stress-free, the whole volume gain loose
+    /// (J_p = e^{tr ε}), and while loose it bears no tension at all.
     #[test]
-    fn cohesion_bears_tension_up_to_the_apex() {
+    fn cohesion_bears_tension_up_to_the_apex_then_the_sand_comes_apart() {
         let c = 100.0;
         let m = sand(30.0, c);
+        let (mu, lambda) = lame(m.youngs_modulus, m.poisson_ratio);
+        let apex = m.apex_trace(2, mu, lambda);
+        let inside = Vector2::repeat(0.5 * apex * (1.0 - 1e-12));
+        assert_eq!(m.project(&inside, 0.0), (inside, 0.0));
+        let t = kirchhoff_principal(&m, &inside);
+        let tension = c / 30f64.to_radians().tan();
+        assert!((t[0] - tension).abs() < 1e-9 * tension && (t[1] - tension).abs() < 1e-9 * tension, "{t:?}");
         let (eps, ln_jp) = m.project(&Vector2::new(0.01, 0.01), 0.0);
-        assert!(ln_jp > 0.0);
+        assert_eq!((eps, ln_jp), (Vector2::zeros(), 0.02));
+        let (eps, ln_jp) = m.project(&Vector2::repeat(0.1 * apex), 1e-3);
+        assert_eq!(eps, Vector2::zeros());
+        assert!((ln_jp - (0.2 * apex + 1e-3)).abs() < 1e-15);
+    }
+
+    /// With cohesion, a state returned to the 2D cone lies on Mohr–Coulomb's line with its intercept:
+    /// (σ1 − σ2)/2 = c cos φ − (σ1 + σ2)/2 · sin φ (tension positive), to 1e-9 relative.
+    #[test]
+    fn plane_return_with_cohesion_lands_on_the_mohr_coulomb_line() {
+        let (c, phi) = (2000.0, 35f64.to_radians());
+        let m = sand(35.0, c);
+        let (eps, _) = m.project(&Vector2::new(-0.03, 0.012), 0.0);
         let t = kirchhoff_principal(&m, &eps);
-        let apex = c / 30f64.to_radians().tan();
-        assert!((t[0] - apex).abs() < 1e-9 * apex && (t[1] - apex).abs() < 1e-9 * apex, "{t:?}");
-        let small = Vector2::new(1e-5, 1e-5);
-        assert_eq!(m.project(&small, 0.0), (small, 0.0));
+        let radius = (t[0] - t[1]).abs() / 2.0;
+        let line = c * phi.cos() - (t[0] + t[1]) / 2.0 * phi.sin();
+        assert!((radius - line).abs() < 1e-9 * radius, "{radius} {line}");
+    }
+
+    /// A step that turns the particle inside out (det F < 0) leaves it stress-free at F_E = I with its loose
+    /// volume; a non-finite velocity gradient leaves F non-finite (nothing hides it).
+    #[test]
+    fn inverted_and_non_finite_steps() {
+        let m = sand(30.0, 0.0);
+        let (mut f, mut jp) = (Matrix2::identity(), 1.2);
+        let flip = Matrix2::new(0.0, 0.0, 0.0, -2.0);
+        <SandKlar2016 as ConstitutiveModel<2>>::update_deformation(&m, &mut f, &mut jp, &flip, 1.0);
+        assert_eq!((f, jp), (Matrix2::identity(), 1.2));
+        let nan = Matrix2::new(f64::NAN, 0.0, 0.0, 0.0);
+        <SandKlar2016 as ConstitutiveModel<2>>::update_deformation(&m, &mut f, &mut jp, &nan, 1.0);
+        assert!(f[(0, 0)].is_nan());
     }
 
     /// The stress of a rotated state is the rotated stress (frame indifference), and the Cauchy stress
