@@ -277,7 +277,7 @@ Scene3 = _model("Scene3", SCHEMA3)
 Grid, Time, Augmented, Seeding = (_MODELS[n] for n in ("Grid", "Time", "Augmented", "Seeding"))
 PolygonWall, CircleWall, PolylineWall = _MODELS["PolygonWall"], _MODELS["CircleWall"], _MODELS["PolylineWall"]
 PolygonBody, BoxBody, CircleBody = _MODELS["PolygonBody"], _MODELS["BoxBody"], _MODELS["CircleBody"]
-Fluid, Elastic, Stvk, Snow = (_MODELS[n] for n in ("Fluid", "Elastic", "Stvk", "Snow"))
+Fluid, Elastic, Stvk, Snow, Sand = (_MODELS[n] for n in ("Fluid", "Elastic", "Stvk", "Snow", "Sand"))
 #: How walls act on the grid, by name.
 Method = _annotation(_DEFS["Method"], "Method")
 WallCondition = _annotation(_DEFS["WallCondition"], "WallCondition")
