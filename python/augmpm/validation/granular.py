@@ -193,8 +193,8 @@ def run(quick: bool) -> tuple[list[Record], dict]:
                     Record(case, method, angle, cells, "particles_outside_end", sim.metrics()["n_outside"], None),
                 ]
                 data["column"][(method, aspect, angle)] = surface(s / COLUMN_WIDTH, y / COLUMN_WIDTH, 1.0 / cells)
-    # The heap is 0.14 m high: 13 cells at 96, 18 at 128. With φ = 30° its slope came out at 34–38° at 64
-    # cells, 30–31° at 96 and 28.5–29.5° at 128: it falls with refinement, and the 2° holds at these two.
+    # The heap is 0.14 m high: 13 cells at 96, 18 at 128. With φ = 30° its slope came out at 34.1° at 64
+    # cells, 30.7° at 96 and 29.3–29.5° at 128: it falls with refinement, and the 2° holds at these two.
     # The quick run does the augmented grid only.
     resolution = 96 if quick else 128
     duration = 6.0
