@@ -54,3 +54,9 @@ def client():
     with distributed.Client(cluster) as c:
         yield c
     cluster.close()
+
+
+def pytest_collection_modifyitems(config, items):
+    """The quick validation (test_validation.py, about half of the suite's time on one core) runs first, so that
+    the workers of pytest-xdist run the other files beside it rather than after it."""
+    items.sort(key=lambda item: item.path.name != "test_validation.py")

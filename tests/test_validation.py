@@ -241,3 +241,30 @@ def test_sand_runs_out_as_the_experiments_and_piles_at_its_friction_angle(quick_
     assert _value(records, "granular_column_a1", "augmented", "particles_outside_end", 30.0) == 0
     assert _value(records, "granular_heap", "augmented", "particles_outside_max", 30.0) == 0
     assert (out / "granular.png").stat().st_size > 1000
+
+
+def test_cases_in_processes_give_the_records_of_one_process():
+    """Determinism: the cases handed to a pool of processes (`--jobs 2`) give the records, in the same order,
+    that they give one after another in this process (the two interpolation cases, the quickest)."""
+    from augmpm.validation import interpolation, interpolation3d
+    from augmpm.validation.suite import _Cases
+
+    stages = [
+        ("interpolation", "interpolation near walls", interpolation.run, (True, [30.0])),
+        ("interpolation3d", "3D: interpolation", interpolation3d.run, (True, [30.0])),
+    ]
+    taken = []
+    for jobs in (1, 2):
+        with _Cases(stages, jobs, progress=False) as cases:
+            for key, *_ in stages:
+                cases.take(key)
+            taken.append([r.to_json() for r in cases.records])
+    assert taken[0] and taken[0] == taken[1]
+
+
+def test_validate_refuses_no_jobs(tmp_path, capsys):
+    """`--jobs 0` is refused with the flag's name, exit 2, and no report written."""
+    code = main(["validate", "--quick", "--jobs", "0", "--out", str(tmp_path / "v"), "--no-progress"])
+    assert code == 2
+    assert "--jobs: must be at least 1" in capsys.readouterr().err
+    assert not (tmp_path / "v").exists()

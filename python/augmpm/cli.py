@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -122,6 +123,9 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--quick", action="store_true", help="coarse and short (a few minutes on 2 cores)")
     v.add_argument("--out", type=Path, default=Path("runs/validation"), help="output directory")
     v.add_argument("--no-progress", action="store_true", help="do not print progress")
+    v.add_argument(
+        "--jobs", type=int, metavar="N", help="cases run at once, each in a process of its own (default: one per core)"
+    )
 
     sub.add_parser("scenes", help="list the scenes shipped with augmpm (run one by its name)")
     sc = sub.add_parser("schema", help="print the JSON Schema of scene files (for editors), or the scene reference")
@@ -231,8 +235,11 @@ def _compare(args: argparse.Namespace) -> int:
 def _validate(args: argparse.Namespace) -> int:
     from augmpm.validation.suite import all_augmented_pass, run_validation
 
+    jobs = args.jobs if args.jobs is not None else len(os.sched_getaffinity(0))
+    if jobs < 1:
+        raise _core.SceneError(f"--jobs: must be at least 1, got {jobs}")
     out = _output_dir(args.out)
-    records = run_validation(out, quick=args.quick, progress=not args.no_progress)
+    records = run_validation(out, quick=args.quick, progress=not args.no_progress, jobs=jobs)
     judged = [r for r in records if r.method == "augmented" and r.passed is not None]
     failed = [r for r in judged if not r.passed]
     print(f"augmented: {len(judged) - len(failed)} of {len(judged)} judged metrics pass; report in {out / 'report.md'}")

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import multiprocessing
 import sys
 import time
 from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -116,27 +118,89 @@ def _plot_sand(data: dict, out: Path) -> str:
     return "granular.png"
 
 
-def run_validation(out: Path, quick: bool = False, progress: bool = True) -> list[Record]:
-    """Runs all cases (quick: coarse and short) and writes the report into `out`."""
+def run_validation(out: Path, quick: bool = False, progress: bool = True, jobs: int = 1) -> list[Record]:
+    """Runs all cases (quick: coarse and short) and writes the report into `out`; with ``jobs`` > 1 the cases
+    run in that many processes at once (each case's numbers are the same either way: a case is a set of
+    deterministic simulations), and the records and plots come in the same order."""
     out.mkdir(parents=True, exist_ok=True)
     angles = ANGLES
-    records: list[Record] = []
-    plots: list[tuple[str, str]] = []
+    stages = [
+        ("channels", "channels (Poiseuille, Couette, full slip)", channel.run, (quick, angles)),
+        ("convergence", "channel convergence", channel.run_convergence, (quick, 30.0)),
+        ("incline", "block on a frictionless incline", incline.run, (quick, angles)),
+        ("incline3d", "3D: ball on a frictionless plane at a compound angle", incline3d.run, (quick, angles)),
+        ("rough_incline", "block on a rough incline (Coulomb friction)", incline.run_friction, (quick,)),
+        ("moving", "walls that move (containers carried, turned, shaken; a piston)", moving.run, (quick,)),
+        ("rigid", "rigid bodies (momentum exchanged, floating, impacts)", rigid.run, (quick,)),
+        ("hydrostatic", "hydrostatic column", hydrostatic.run, (quick, angles)),
+        ("hydrostatic3d", "3D: hydrostatic column in a tilted box", hydrostatic3d.run, (quick,)),
+        ("film3d", "3D: film flow down a plane at a compound angle", film3d.run, (quick,)),
+        ("rotation", "rotation in a circular container", rotation.run, (quick,)),
+        ("dam_break", "dam break", dam_break.run, (quick, angles)),
+        ("granular", "sand: a collapsing column and a poured heap", granular.run, (quick,)),
+        ("interpolation", "interpolation near walls", interpolation.run, (quick, angles)),
+        ("interpolation3d", "3D: interpolation near a plane and a sphere", interpolation3d.run, (quick, angles)),
+    ]
+    with _Cases(stages, jobs, progress) as cases:
+        return _run_and_report(out, quick, angles, cases)
 
-    def stage(title: str, fn):
-        start = time.perf_counter()
-        if progress:
-            print(f"validate: {title} ...", file=sys.stderr, flush=True)
-        recs, data = fn()
-        records.extend(recs)
-        if progress:
-            print(f"validate: {title} done in {time.perf_counter() - start:.0f} s", file=sys.stderr, flush=True)
+
+def _timed(fn: Callable, args: tuple) -> tuple[list[Record], object, float]:
+    """A case's records and data, and the seconds it took (in the process that ran it)."""
+    start = time.perf_counter()
+    recs, data = fn(*args)
+    return recs, data, time.perf_counter() - start
+
+
+class _Cases:
+    """The validation cases, run in order on this process (``jobs`` 1) or all handed at once to a pool of
+    ``jobs`` processes; :meth:`take` gives a case's data (and keeps its records) in the report's order."""
+
+    def __init__(self, stages: list[tuple[str, str, Callable, tuple]], jobs: int, progress: bool) -> None:
+        self.stages = {key: (title, fn, args) for key, title, fn, args in stages}
+        self.progress = progress
+        self.records: list[Record] = []
+        self.pool = None
+        self.futures = {}
+        if jobs > 1:
+            # Fresh interpreters (spawn): the engine's thread pools are not forked.
+            context = multiprocessing.get_context("spawn")
+            self.pool = ProcessPoolExecutor(max_workers=min(jobs, len(stages)), mp_context=context)
+            self.futures = {key: self.pool.submit(_timed, fn, args) for key, _, fn, args in stages}
+            if progress:
+                print(f"validate: {len(stages)} cases in {min(jobs, len(stages))} processes", file=sys.stderr)
+
+    def __enter__(self) -> _Cases:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.pool is not None:
+            self.pool.shutdown(wait=True, cancel_futures=True)
+
+    def take(self, key: str):
+        title, fn, args = self.stages[key]
+        if self.pool is None:
+            if self.progress:
+                print(f"validate: {title} ...", file=sys.stderr, flush=True)
+            recs, data, seconds = _timed(fn, args)
+        else:
+            recs, data, seconds = self.futures[key].result()
+        self.records.extend(recs)
+        if self.progress:
+            print(f"validate: {title} done in {seconds:.0f} s", file=sys.stderr, flush=True)
         return data
 
-    ch = stage("channels (Poiseuille, Couette, full slip)", lambda: channel.run(quick, angles))
+
+def _run_and_report(out: Path, quick: bool, angles: list[float], cases: _Cases) -> list[Record]:
+    """Takes each case's results in order, draws its plots and writes the report."""
+    records = cases.records
+    plots: list[tuple[str, str]] = []
+    stage = cases.take
+
+    ch = stage("channels")
     plots += [("Channel profiles", n) for n in _plot_channels(ch, out, angles)]
 
-    conv = stage("channel convergence", lambda: channel.run_convergence(quick, 30.0))
+    conv = stage("convergence")
 
     def draw_conv(ax):
         for (kind, method), (levels, errs) in conv.items():
@@ -160,17 +224,17 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
 
         return draw
 
-    inc = stage("block on a frictionless incline", lambda: incline.run(quick, angles))
+    inc = stage("incline")
     draw_inc = draw_slides(inc, "Block on a full-slip incline (lines: g sinθ)")
     plots.append(("Block on a frictionless incline", _plot_simple(out, "incline.png", draw_inc)))
 
-    inc3 = stage("3D: ball on a frictionless plane at a compound angle", lambda: incline3d.run(quick, angles))
+    inc3 = stage("incline3d")
     draw_inc3 = draw_slides(inc3, "3D: ball on a full-slip plane (lines: g sinθ)")
     plots.append(
         ("3D: ball on a frictionless plane at a compound angle", _plot_simple(out, "incline3d.png", draw_inc3))
     )
 
-    rough = stage("block on a rough incline (Coulomb friction)", lambda: incline.run_friction(quick))
+    rough = stage("rough_incline")
 
     def draw_rough(ax):
         for (method, angle, mu), (t, s, a) in rough.items():
@@ -184,10 +248,10 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
 
     plots.append(("Block on a rough incline", _plot_simple(out, "incline_friction.png", draw_rough)))
 
-    stage("walls that move (containers carried, turned, shaken; a piston)", lambda: moving.run(quick))
-    stage("rigid bodies (momentum exchanged, floating, impacts)", lambda: rigid.run(quick))
+    stage("moving")
+    stage("rigid")
 
-    hyd = stage("hydrostatic column", lambda: hydrostatic.run(quick, angles))
+    hyd = stage("hydrostatic")
 
     def draw_hyd(ax):
         markers = {"hydrostatic": "o", "hydrostatic_grid_density": "x", "hydrostatic_density_corrected": "+"}
@@ -201,7 +265,7 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
 
     plots.append(("Hydrostatic pressure", _plot_simple(out, "hydrostatic.png", draw_hyd)))
 
-    hyd3 = stage("3D: hydrostatic column in a tilted box", lambda: hydrostatic3d.run(quick))
+    hyd3 = stage("hydrostatic3d")
 
     def draw_hyd3(ax):
         for (method, angle), (y, p, y_s) in hyd3.items():
@@ -214,7 +278,7 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
 
     plots.append(("3D: hydrostatic pressure in a tilted box", _plot_simple(out, "hydrostatic3d.png", draw_hyd3)))
 
-    film = stage("3D: film flow down a plane at a compound angle", lambda: film3d.run(quick))
+    film = stage("film3d")
 
     def draw_film(ax):
         for (method, angle), (times, samples) in film.items():
@@ -229,7 +293,7 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
 
     plots.append(("3D: film flow down a plane", _plot_simple(out, "film3d.png", draw_film)))
 
-    rot = stage("rotation in a circular container", lambda: rotation.run(quick))
+    rot = stage("rotation")
 
     def draw_rot(ax):
         for (case, method), (t, ratios) in rot.items():
@@ -241,7 +305,7 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
 
     plots.append(("Rotation", _plot_simple(out, "rotation.png", draw_rot)))
 
-    dam = stage("dam break", lambda: dam_break.run(quick, angles))
+    dam = stage("dam_break")
 
     def draw_dam(ax):
         t_exp, z_exp = dam["experiment"]
@@ -253,7 +317,7 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
 
     plots.append(("Dam break", _plot_simple(out, "dam_break.png", draw_dam)))
 
-    gran = stage("sand: a collapsing column and a poured heap", lambda: granular.run(quick))
+    gran = stage("granular")
 
     plots.append(("Sand", _plot_sand(gran, out)))
 
@@ -270,11 +334,11 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True) -> lis
 
         return draw
 
-    itp = stage("interpolation near walls", lambda: interpolation.run(quick, angles))
+    itp = stage("interpolation")
     draw_itp = draw_interpolation(itp, "circle", "Interpolation near walls")
     plots.append(("Interpolation", _plot_simple(out, "interpolation.png", draw_itp)))
 
-    itp3 = stage("3D: interpolation near a plane and a sphere", lambda: interpolation3d.run(quick, angles))
+    itp3 = stage("interpolation3d")
     draw_itp3 = draw_interpolation(itp3, "sphere", "3D: interpolation near a plane and a sphere")
     plots.append(("3D: interpolation", _plot_simple(out, "interpolation3d.png", draw_itp3)))
 
