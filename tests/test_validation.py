@@ -268,3 +268,20 @@ def test_validate_refuses_no_jobs(tmp_path, capsys):
     assert code == 2
     assert "--jobs: must be at least 1" in capsys.readouterr().err
     assert not (tmp_path / "v").exists()
+
+
+def test_sand_measures_read_a_known_heap_and_deposit():
+    """The sand cases' measures on drawn deposits: a heap of 25° sides (particles at 1 mm spacing under
+    y = 0.1 m − |s| tan 25°) reads 25° on both sides to within 0.2° (the tops of 5 mm bins lie on the
+    sides), and a layer 20 mm thick ending 0.3 m from the back wall has its toe within a bin (h/2 = 5 mm)
+    of 0.3 m."""
+    from augmpm.validation import granular
+
+    grid = np.mgrid[-0.3:0.3:0.001, 0.0:0.1:0.001].reshape(2, -1)
+    s, y = grid[:, grid[1] <= 0.1 - np.abs(grid[0]) * np.tan(np.radians(25.0))]
+    left, right, centres, tops = granular.heap_slopes(s, y, 0.005)
+    assert abs(left - 25.0) < 0.2 and abs(right - 25.0) < 0.2, (left, right)
+    assert len(centres) == len(tops) and tops.max() <= 0.1
+
+    layer = np.mgrid[0.0:0.3:0.001, 0.0:0.02:0.001].reshape(2, -1)
+    assert abs(granular.deposit_toe(layer[0], layer[1], 0.01) - 0.3) <= 0.005

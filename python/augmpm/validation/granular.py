@@ -82,19 +82,25 @@ def deposit_toe(s: np.ndarray, y: np.ndarray, h: float) -> float:
     """The farthest distance from the back wall (m) up to which the deposit, in bins of h/2, is at least h/2
     thick without a gap (`s`, `y`: the particles along and above the floor, m)."""
     edges = np.arange(0.0, max(float(s.max()), 0.0) + h, h / 2)
-    top = np.zeros(len(edges))
-    np.maximum.at(top, np.clip(np.digitize(s, edges) - 1, 0, len(edges) - 1), y)
+    top = bin_tops(s, y, edges, empty=0.0)
     k = 0
     while k < len(top) and top[k] >= h / 2:
         k += 1
     return float(edges[k]) if k < len(edges) else float(edges[-1] + h / 2)
 
 
+def bin_tops(s: np.ndarray, y: np.ndarray, edges: np.ndarray, empty: float) -> np.ndarray:
+    """The highest `y` (m) of the particles in each bin along the floor that starts at an edge of `edges` (m;
+    particles before the first edge count in the first bin, past the last in the last), `empty` where none is."""
+    top = np.full(len(edges), empty)
+    np.maximum.at(top, np.clip(np.digitize(s, edges) - 1, 0, len(edges) - 1), y)
+    return top
+
+
 def surface(s: np.ndarray, y: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
     """The deposit's surface: the highest particle of each bin of `width` along the floor (bin centres, tops)."""
     edges = np.arange(float(s.min()), float(s.max()) + width, width)
-    top = np.full(len(edges), -np.inf)
-    np.maximum.at(top, np.clip(np.digitize(s, edges) - 1, 0, len(edges) - 1), y)
+    top = bin_tops(s, y, edges, empty=-np.inf)
     keep = np.isfinite(top)
     return edges[keep] + width / 2, top[keep]
 
@@ -151,8 +157,7 @@ def heap_slopes(s: np.ndarray, y: np.ndarray, h: float) -> tuple[float, float, n
     below = y < ORIFICE_HEIGHT - 0.01
     s, y = s[below], y[below]
     edges = np.arange(-0.35, 0.35 + h, h)
-    top = np.full(len(edges), -1.0)
-    np.maximum.at(top, np.clip(np.digitize(s, edges) - 1, 0, len(edges) - 1), y)
+    top = bin_tops(s, y, edges, empty=-1.0)
     centres = edges + h / 2
     height = top.max()
     slopes = []
