@@ -60,3 +60,11 @@ def pytest_collection_modifyitems(config, items):
     """The quick validation (test_validation.py, about half of the suite's time on one core) runs first, so that
     the workers of pytest-xdist run the other files beside it rather than after it."""
     items.sort(key=lambda item: item.path.name != "test_validation.py")
+
+
+def pytest_xdist_auto_num_workers(config):
+    """`-n auto` (pyproject.toml): one worker per core this process may use, as `augmpm validate --jobs` counts
+    them (pytest-xdist's own count is of physical cores, without the affinity)."""
+    from augmpm.simulation import available_cores
+
+    return available_cores()

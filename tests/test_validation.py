@@ -245,7 +245,8 @@ def test_sand_runs_out_as_the_experiments_and_piles_at_its_friction_angle(quick_
 
 def test_cases_in_processes_give_the_records_of_one_process():
     """Determinism: the cases handed to a pool of processes (`--jobs 2`) give the records, in the same order,
-    that they give one after another in this process (the two interpolation cases, the quickest)."""
+    that they give one after another in this process (the two interpolation cases, the quickest; the quick
+    report of this module is made with one process per core)."""
     from augmpm.validation import interpolation, interpolation3d
     from augmpm.validation.suite import _Cases
 
@@ -260,6 +261,23 @@ def test_cases_in_processes_give_the_records_of_one_process():
                 cases.take(key)
             taken.append([r.to_json() for r in cases.records])
     assert taken[0] and taken[0] == taken[1]
+
+
+def test_an_engine_error_in_a_case_process_is_raised_as_itself():
+    """An engine error raised by a case in a pool process (here the refusal of 0 threads) reaches the caller
+    as the same class with the same message (the engine's errors cannot be pickled), and the pool stops."""
+    from augmpm import _core
+    from augmpm.simulation import resolve_threads
+    from augmpm.validation import interpolation
+    from augmpm.validation.suite import _Cases
+
+    stages = [
+        ("bad", "a case that raises", resolve_threads, (0,)),
+        ("interpolation", "interpolation near walls", interpolation.run, (True, [30.0])),
+    ]
+    with pytest.raises(_core.SceneError, match="threads: must be an integer from 1 to 1024, got 0"):
+        with _Cases(stages, 2, progress=False) as cases:
+            cases.take("bad")
 
 
 def test_validate_refuses_no_jobs(tmp_path, capsys):

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
@@ -233,9 +232,10 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _validate(args: argparse.Namespace) -> int:
+    from augmpm.simulation import available_cores
     from augmpm.validation.suite import all_augmented_pass, run_validation
 
-    jobs = args.jobs if args.jobs is not None else len(os.sched_getaffinity(0))
+    jobs = args.jobs if args.jobs is not None else available_cores()
     if jobs < 1:
         raise _core.SceneError(f"--jobs: must be at least 1, got {jobs}")
     out = _output_dir(args.out)

@@ -330,6 +330,11 @@ def memory_limit() -> int:
         return 2**63 - 1
 
 
+def available_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system has one)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
 def resolve_threads(threads: int | None = None) -> int:
     """The thread count to run on: ``threads`` if given, else ``$AUGMPM_THREADS``, else every core
     this process may use."""
@@ -341,7 +346,7 @@ def resolve_threads(threads: int | None = None) -> int:
         except ValueError:
             raise _plain_error(THREADS_ENV, f"must be a positive integer, got {threads!r}") from None
     if threads is None:
-        return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        return available_cores()
     if not isinstance(threads, (int, np.integer)) or isinstance(threads, bool) or not 1 <= threads <= 1024:
         raise _plain_error(source, f"must be an integer from 1 to 1024, got {threads!r}")
     return int(threads)

@@ -66,8 +66,11 @@ class CaseFailed(Exception):
     """A case's simulation failed (non-finite state, a particle leaving the grid) at `time` (s)."""
 
     def __init__(self, message: str, time: float) -> None:
-        super().__init__(message)
+        super().__init__(message, time)
         self.time = time
+
+    def __str__(self) -> str:
+        return str(self.args[0])
 
 
 def simulate(

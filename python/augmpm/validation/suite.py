@@ -4,15 +4,17 @@ from __future__ import annotations
 
 import json
 import multiprocessing
+import os
 import sys
 import time
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from augmpm.files import save_png, write_text
+from augmpm.simulation import THREADS_ENV, available_cores
 from augmpm.validation import (
     analytic,
     channel,
@@ -152,30 +154,72 @@ def _timed(fn: Callable, args: tuple) -> tuple[list[Record], object, float]:
     return recs, data, time.perf_counter() - start
 
 
+def _in_worker(fn: Callable, args: tuple):
+    """:func:`_timed` in a pool process. The engine's errors cannot be pickled (their module is the
+    extension's): one comes back as its class name and message, for :meth:`_Cases.take` to raise again."""
+    from augmpm import _core
+
+    try:
+        return _timed(fn, args)
+    except _core.Error as e:
+        return _Raised(type(e).__name__, str(e))
+
+
+@dataclass(frozen=True)
+class _Raised:
+    """An engine error raised by a case in a pool process: `_core`'s class name and the message."""
+
+    kind: str
+    message: str
+
+
+def _share_the_cores(threads: int) -> None:
+    """A pool process's engine runs on its share of the cores (unless AUGMPM_THREADS says otherwise)."""
+    os.environ.setdefault(THREADS_ENV, str(threads))
+
+
 class _Cases:
     """The validation cases, run in order on this process (``jobs`` 1) or all handed at once to a pool of
-    ``jobs`` processes; :meth:`take` gives a case's data (and keeps its records) in the report's order."""
+    ``jobs`` processes, each with its share of the cores; :meth:`take` gives a case's data (and keeps its
+    records) in the report's order. A case that raises, or an interrupt, stops the pool's processes at once.
+    As with any spawned pool, a script that calls this with ``jobs`` > 1 must guard its main code with
+    ``if __name__ == "__main__"``."""
 
     def __init__(self, stages: list[tuple[str, str, Callable, tuple]], jobs: int, progress: bool) -> None:
         self.stages = {key: (title, fn, args) for key, title, fn, args in stages}
         self.progress = progress
         self.records: list[Record] = []
         self.pool = None
-        self.futures = {}
+        self.results = {}
         if jobs > 1:
+            jobs = min(jobs, len(stages))
             # Fresh interpreters (spawn): the engine's thread pools are not forked.
+            threads = max(1, available_cores() // jobs)
             context = multiprocessing.get_context("spawn")
-            self.pool = ProcessPoolExecutor(max_workers=min(jobs, len(stages)), mp_context=context)
-            self.futures = {key: self.pool.submit(_timed, fn, args) for key, _, fn, args in stages}
+            self.pool = context.Pool(jobs, initializer=_share_the_cores, initargs=(threads,))
+            self.results = {
+                key: self.pool.apply_async(_in_worker, (fn, args), callback=self._done(title))
+                for key, title, fn, args in stages
+            }
+            self.pool.close()
             if progress:
-                print(f"validate: {len(stages)} cases in {min(jobs, len(stages))} processes", file=sys.stderr)
+                print(f"validate: {len(stages)} cases in {jobs} processes", file=sys.stderr, flush=True)
+
+    def _done(self, title: str) -> Callable:
+        def report(result) -> None:
+            if self.progress and not isinstance(result, _Raised):
+                print(f"validate: {title} done in {result[2]:.0f} s", file=sys.stderr, flush=True)
+
+        return report
 
     def __enter__(self) -> _Cases:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, kind, *_) -> None:
         if self.pool is not None:
-            self.pool.shutdown(wait=True, cancel_futures=True)
+            if kind is not None:
+                self.pool.terminate()
+            self.pool.join()
 
     def take(self, key: str):
         title, fn, args = self.stages[key]
@@ -183,11 +227,16 @@ class _Cases:
             if self.progress:
                 print(f"validate: {title} ...", file=sys.stderr, flush=True)
             recs, data, seconds = _timed(fn, args)
+            if self.progress:
+                print(f"validate: {title} done in {seconds:.0f} s", file=sys.stderr, flush=True)
         else:
-            recs, data, seconds = self.futures[key].result()
+            result = self.results[key].get()
+            if isinstance(result, _Raised):
+                from augmpm import _core
+
+                raise getattr(_core, result.kind)(result.message)
+            recs, data, _ = result
         self.records.extend(recs)
-        if self.progress:
-            print(f"validate: {title} done in {seconds:.0f} s", file=sys.stderr, flush=True)
         return data
 
 
