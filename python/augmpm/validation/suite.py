@@ -181,7 +181,8 @@ def _share_the_cores(threads: int) -> None:
 class _Cases:
     """The validation cases, run in order on this process (``jobs`` 1) or all handed at once to a pool of
     ``jobs`` processes, each with its share of the cores; :meth:`take` gives a case's data (and keeps its
-    records) in the report's order. A case that raises, or an interrupt, stops the pool's processes at once.
+    records) in the report's order. A case that raised stops the pool's processes when it is taken; an
+    interrupt, at once.
     As with any spawned pool, a script that calls this with ``jobs`` > 1 must guard its main code with
     ``if __name__ == "__main__"``."""
 
