@@ -265,7 +265,7 @@ def test_cases_in_processes_give_the_records_of_one_process():
 
 def test_an_engine_error_in_a_case_process_is_raised_as_itself():
     """An engine error raised by a case in a pool process (here the refusal of 0 threads) reaches the caller
-    as the same class with the same message (the engine's errors cannot be pickled), and the pool stops."""
+    as the same class with the same message (the engine's errors cannot be pickled)."""
     from augmpm import _core
     from augmpm.simulation import resolve_threads
     from augmpm.validation import interpolation

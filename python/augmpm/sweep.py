@@ -53,6 +53,7 @@ import numpy as np
 from augmpm import _core
 from augmpm.files import output_dir, save_png, write_bytes, write_text
 from augmpm.scene import _plain_error, load_scene, scene_path
+from augmpm.simulation import available_cores
 
 #: What the sweep reports of each run after its parameters: ``status`` (``ok``; ``failed``: the simulation
 #: went bad, ``error`` says at which step and why; ``error``: the run could not be completed, and will be
@@ -316,7 +317,7 @@ def dask_client(scheduler: str | None, workers: int | None, client: Any = None) 
         with own:
             yield own, None
         return
-    cores = os.cpu_count() or 1
+    cores = available_cores()
     n = workers or cores
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40)
     with cluster, Client(cluster) as own:
