@@ -55,8 +55,9 @@ impl<const D: usize> Stencil<D> {
     }
 
     /// Calls `f(offset, i − origin, weight, x_i − x_p)` for every node of the stencil, in the order of
-    /// [`Stencil::for_each`]: nested per axis in 2D and 3D (no index arithmetic per node), with the weight
-    /// the product `((1·w₀)·w₁)·w₂` in that order.
+    /// [`Stencil::for_each`]: nested per axis in 2D and 3D, a row of three nodes along the first axis
+    /// innermost, with what is constant along the row (the other axes' weights, offsets and index) taken
+    /// out of it. The weight is the product `((1·w₀)·w₁)·w₂` in that order (`1·w₀ = w₀` exactly).
     #[inline(always)]
     pub fn visit(&self, h: Real, strides: &[usize; D], mut f: impl FnMut([usize; D], usize, Real, Vector<D>)) {
         let mut dk = [[0.0; 3]; D];
@@ -65,36 +66,32 @@ impl<const D: usize> Stencil<D> {
                 *d = (j as Real - self.fx[a]) * h;
             }
         }
-        let node = |o: [usize; D]| {
-            let mut weight = 1.0;
-            let mut dpos = Vector::<D>::zeros();
-            let mut i = 0;
-            for a in 0..D {
-                weight *= self.w[a][o[a]];
-                dpos[a] = dk[a][o[a]];
-                i += o[a] * strides[a];
-            }
-            (i, weight, dpos)
-        };
         match D {
             2 => {
                 for b in 0..3 {
+                    let (wb, row) = (self.w[1][b], b * strides[1]);
+                    let mut dpos = Vector::<D>::zeros();
+                    dpos[1] = dk[1][b];
                     for a in 0..3 {
                         let mut o = [0; D];
                         (o[0], o[1]) = (a, b);
-                        let (i, w, d) = node(o);
-                        f(o, i, w, d);
+                        dpos[0] = dk[0][a];
+                        f(o, row + a * strides[0], self.w[0][a] * wb, dpos);
                     }
                 }
             }
             3 => {
                 for c in 0..3 {
+                    let (wc, plane) = (self.w[2][c], c * strides[2]);
                     for b in 0..3 {
+                        let (wb, row) = (self.w[1][b], b * strides[1] + plane);
+                        let mut dpos = Vector::<D>::zeros();
+                        (dpos[1], dpos[2]) = (dk[1][b], dk[2][c]);
                         for a in 0..3 {
                             let mut o = [0; D];
                             (o[0], o[1], o[2]) = (a, b, c);
-                            let (i, w, d) = node(o);
-                            f(o, i, w, d);
+                            dpos[0] = dk[0][a];
+                            f(o, row + a * strides[0], self.w[0][a] * wb * wc, dpos);
                         }
                     }
                 }
@@ -102,8 +99,15 @@ impl<const D: usize> Stencil<D> {
             _ => {
                 for k in 0..stencil_len(D) {
                     let o = stencil_offset::<D>(k);
-                    let (i, w, d) = node(o);
-                    f(o, i, w, d);
+                    let mut weight = 1.0;
+                    let mut dpos = Vector::<D>::zeros();
+                    let mut i = 0;
+                    for a in 0..D {
+                        weight *= self.w[a][o[a]];
+                        dpos[a] = dk[a][o[a]];
+                        i += o[a] * strides[a];
+                    }
+                    f(o, i, weight, dpos);
                 }
             }
         }

@@ -418,12 +418,16 @@ impl<const D: usize> Schedule<D> {
     }
 }
 
-/// Whether the whole stencil of a particle at `x` is inside the grid.
+/// Whether the whole stencil of a particle at `x` is inside the grid: its lowest node, at index
+/// `floor(y) + GHOST` with `y = x/h − 1/2`, at 0 or above, and its highest, two further, below `dims`.
+/// The bounds are integers, so that is `−GHOST ≤ y < dims − 2 − GHOST`, compared without the floor
+/// (NaN and the infinities fail it, as they must).
 #[inline]
 pub fn stencil_in_grid<const D: usize>(layout: &GridLayout<D>, x: &Vector<D>, inv_h: Real) -> bool {
+    use crate::grid::GHOST;
     (0..D).all(|k| {
-        let o = floor_i64(x[k] * inv_h - 0.5).saturating_add(crate::grid::GHOST);
-        x[k].is_finite() && o >= 0 && (o as usize) + 2 < layout.dims[k]
+        let y = x[k] * inv_h - 0.5;
+        y >= -(GHOST as Real) && y < (layout.dims[k] as i64 - 2 - GHOST) as Real
     })
 }
 
@@ -446,6 +450,39 @@ fn block_of<const D: usize>(layout: &GridLayout<D>, block_dims: &[usize; D], x: 
 mod tests {
     use super::*;
     use nalgebra::Vector2;
+
+    /// `stencil_in_grid` is the floor-based definition (lowest node `floor(x/h − 1/2) + GHOST` at 0 or
+    /// above, highest below `dims`, x finite) at every position: random ones, each node and cell centre
+    /// across the grid's edges and just beside them, and the non-finite values.
+    #[test]
+    fn stencil_in_grid_is_the_floor_definition() {
+        let layout = GridLayout::<2>::new(0.1, [8, 5]);
+        let inv_h = 1.0 / layout.h;
+        let by_floor = |x: &Vector2<Real>| {
+            (0..2).all(|k| {
+                let o = floor_i64(x[k] * inv_h - 0.5).saturating_add(crate::grid::GHOST);
+                x[k].is_finite() && o >= 0 && (o as usize) + 2 < layout.dims[k]
+            })
+        };
+        let mut coords: Vec<Real> =
+            vec![Real::NAN, Real::INFINITY, Real::NEG_INFINITY, Real::MAX, -Real::MAX, 0.0, -0.0];
+        // Nodes and cell centres from 5 cells below the grid to 10 past it, and a few ulps to either side.
+        for i in -10..=40 {
+            let c = i as Real * 0.5 * layout.h;
+            let ulps = 4.0 * Real::EPSILON * c.abs().max(1.0);
+            coords.extend([c, c + ulps, c - ulps]);
+        }
+        coords.extend(scattered(500, 3).iter().map(|p| ((p.x - 0.25) * 1.5) as Real));
+        let mut inside = 0;
+        for &a in &coords {
+            for &b in &coords {
+                let x = Vector2::new(a, b);
+                assert_eq!(stencil_in_grid(&layout, &x, inv_h), by_floor(&x), "at {x:?}");
+                inside += usize::from(by_floor(&x));
+            }
+        }
+        assert!(inside > 1000, "the positions reach inside the grid ({inside})");
+    }
 
     fn scattered(n: usize, seed: u64) -> Vec<Vector2<f64>> {
         let mut s = seed;

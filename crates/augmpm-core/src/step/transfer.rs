@@ -35,8 +35,12 @@ pub fn scatter_mass<const D: usize>(
             let (s, origin) = stencil(layout, &x[p as usize], inv_h);
             reach.check(&s.base);
             let mp = mass[p as usize];
-            // SAFETY: blocks scattered together never share a node (see `schedule`).
-            s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| unsafe { out.update(i, |m| *m += w * mp) });
+            assert!(last_node(layout, origin) < out.len());
+            // SAFETY: in bounds (the stencil's last node is, checked above); blocks scattered together
+            // never share a node (see `schedule`).
+            s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| unsafe {
+                out.update_unchecked(i, |m| *m += w * mp)
+            });
         }
     });
 }
@@ -67,9 +71,11 @@ pub fn scatter_volume_ratio<const D: usize>(
             let (s, origin) = stencil(layout, &x[p], inv_h);
             reach.check(&s.base);
             let (m, mj) = (vol0[p], vol0[p] * jp[p]);
-            // SAFETY: blocks scattered together never share a node (see `schedule`).
+            assert!(last_node(layout, origin) < out.len());
+            // SAFETY: in bounds (the stencil's last node is, checked above); blocks scattered together
+            // never share a node (see `schedule`).
             s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| unsafe {
-                out.update(i, |g| {
+                out.update_unchecked(i, |g| {
                     g.0 += w * m;
                     g.1 += w * mj;
                 })
@@ -99,8 +105,17 @@ pub fn volume_ratio_at<const D: usize>(
     grid: &[(Real, Real)],
 ) -> Real {
     let mut sum = 0.0;
-    s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| sum += w * grid[i].1);
+    assert!(last_node(layout, origin) < grid.len());
+    // SAFETY: i ≤ the stencil's last node, in bounds (checked above).
+    s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| sum += w * unsafe { grid.get_unchecked(i) }.1);
     sum
+}
+
+/// Index of the last node (offset `[2; D]`) of the stencil whose first node is `origin`: every node of
+/// the stencil is at or below it, so one bounds check covers all 3^D.
+#[inline(always)]
+fn last_node<const D: usize>(layout: &GridLayout<D>, origin: usize) -> usize {
+    origin + layout.offset(&[2; D])
 }
 
 /// Stencil of a particle the schedule has sorted (so its stencil is inside the grid).
@@ -129,7 +144,11 @@ pub fn density_at<const D: usize>(
     let (mut sum, mut weight) = (0.0, 0.0);
     match wall_fraction {
         None => {
-            s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| sum += w * grid_mass[i]);
+            assert!(last_node(layout, origin) < grid_mass.len());
+            // SAFETY: i ≤ the stencil's last node, in bounds (checked above).
+            s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| {
+                sum += w * unsafe { grid_mass.get_unchecked(i) }
+            });
             sum * inv_cell_volume
         }
         Some(f) => {
@@ -273,18 +292,21 @@ pub fn p2g<const D: usize>(
                     let affine = cp * mp - stress * apic;
                     let mv = vp * mp;
                     // The farthest node of the stencil: one bounds check for the 3^D writes.
-                    let last = origin + layout.offset(&[2; D]);
+                    let last = last_node(layout, origin);
                     assert!(last < mass.len() && last < spline.len() && last < momentum.len());
-                    s.for_each_index(h, origin, layout.strides(), |i, w, d| {
-                        // SAFETY: i ≤ last, checked above; exclusive as stated above.
-                        unsafe {
+                    // SAFETY (both loops): i ≤ last, checked above; exclusive as stated above.
+                    if track_spline {
+                        s.for_each_index(h, origin, layout.strides(), |i, w, d| unsafe {
                             mass.update_unchecked(i, |m| *m += w * mp);
-                            if track_spline {
-                                spline.update_unchecked(i, |m| *m += w * mp);
-                            }
+                            spline.update_unchecked(i, |m| *m += w * mp);
                             momentum.update_unchecked(i, |m| *m += (mv + affine * d) * w);
-                        }
-                    });
+                        });
+                    } else {
+                        s.for_each_index(h, origin, layout.strides(), |i, w, d| unsafe {
+                            mass.update_unchecked(i, |m| *m += w * mp);
+                            momentum.update_unchecked(i, |m| *m += (mv + affine * d) * w);
+                        });
+                    }
                 }
                 Some((g, entry @ WallEntry { minv, near, total, tilt, .. })) => {
                     let mut force = stress * dt;
@@ -509,8 +531,10 @@ where
             match t.augmented.and_then(|(g, table)| table.entry(p).map(|e| (g, e))) {
                 None => {
                     let (s, origin) = stencil(layout, xp, inv_h);
+                    assert!(last_node(layout, origin) < velocity.len());
                     s.for_each_index(h, origin, layout.strides(), |i, w, d| {
-                        let vi = velocity[i] * w;
+                        // SAFETY: i ≤ the stencil's last node, in bounds (checked above).
+                        let vi = unsafe { velocity.get_unchecked(i) } * w;
                         vn += vi;
                         cn += vi * d.transpose();
                     });
@@ -574,8 +598,10 @@ where
                 // SAFETY: as above.
                 unsafe { f.update(p, |fq| *fq = fp) };
             }
-            // The particle's kinetic energy must be representable too, or the run's energy is garbage.
-            let finite = xp.iter().chain(vp.iter()).chain(fp.iter()).all(|a| a.is_finite())
+            // `a · 0` is 0 for a finite `a` and NaN otherwise, so the sum is 0 exactly when all are finite
+            // (no branch per value). The particle's kinetic energy must be representable too, or the
+            // run's energy is garbage.
+            let finite = xp.iter().chain(vp.iter()).chain(fp.iter()).fold(0.0, |s: Real, &a| s + a * 0.0) == 0.0
                 && crate::particles::energy_root(mp, vp) < f64::MAX.sqrt();
             G2pSum {
                 held: usize::from(held),
