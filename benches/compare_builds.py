@@ -1,0 +1,84 @@
+"""Two builds of the engine in one process, alternated: the honest way to tell a small change from noise.
+
+    python benches/compare_builds.py NEW.so OLD.so [--resolution 256] [--method naive] [--steps 10]
+        [--rounds 60] [--threads 1]
+
+Each argument is a built extension (`python/augmpm/_core.abi3.so` of a checkout, or one unpacked from a
+wheel: `maturin build --release`). Both step the same dam break (`augmpm.bench.dam_break_scene`), built
+once each, `--steps` steps a round, in alternating order (A B, B A, …), so that the machine's drift and
+the run order fall on both alike. Printed per stage (the engine's stage timers, ns a particle-step): the
+median of each build, the median and range of the round-by-round ratio A/B, and the ratio of the fastest
+rounds (on a shared machine interference only ever slows a round down). Whole-process timings include
+start-up and scene building; this does not.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.machinery
+import importlib.util
+import statistics
+import time
+from pathlib import Path
+
+from augmpm import bench
+from augmpm.simulation import memory_limit
+
+
+def load_engine(label: str, path: Path):
+    """The extension module at `path`, imported under its own name (`<label>._core`) beside the others."""
+    name = f"{label}._core"
+    loader = importlib.machinery.ExtensionFileLoader(name, str(path))
+    spec = importlib.util.spec_from_file_location(name, path, loader=loader)
+    module = importlib.util.module_from_spec(spec)
+    loader.exec_module(module)
+    return module
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("new", type=Path, help="build A: its _core extension")
+    parser.add_argument("old", type=Path, help="build B, the yardstick")
+    parser.add_argument("--resolution", type=int, default=256, help="dam break grid: 128, 256 or 512")
+    parser.add_argument("--method", default="naive", choices=["naive", "augmented"])
+    parser.add_argument("--steps", type=int, default=10, help="steps a round")
+    parser.add_argument("--rounds", type=int, default=60, help="rounds of each build")
+    parser.add_argument("--threads", type=int, default=1)
+    args = parser.parse_args()
+    for path in (args.new, args.old):
+        if not path.is_file():
+            parser.error(f"{path}: no such extension file")
+    scene = bench.dam_break_scene(args.resolution).to_json()
+    sims = {
+        label: load_engine(label, path).Simulation(scene, args.method, args.threads, memory_limit())
+        for label, path in (("A", args.new), ("B", args.old))
+    }
+    for sim in sims.values():
+        sim.step(3)
+    per = sims["A"].num_particles * args.steps / 1e9
+    rounds: dict[str, list[dict[str, float]]] = {"A": [], "B": []}
+    for r in range(args.rounds):
+        for label in ("A", "B") if r % 2 == 0 else ("B", "A"):
+            sim = sims[label]
+            before, start = sim.stage_times(), time.perf_counter()
+            sim.step(args.steps)
+            total = time.perf_counter() - start
+            after = sim.stage_times()
+            rounds[label].append({"step": total / per, **{k: (after[k] - before[k]) / per for k in after}})
+    print(
+        f"dam break {args.resolution}², {args.method}, {args.threads} thread(s), {args.rounds} rounds of "
+        f"{args.steps} steps; ns a particle-step"
+    )
+    print(f"{'stage':9s} {'A':>7s} {'B':>7s}  {'A/B rounds: median [range]':28s} fastest A/B")
+    for stage in rounds["A"][0]:
+        a = [row[stage] for row in rounds["A"]]
+        b = [row[stage] for row in rounds["B"]]
+        ratios = [x / y for x, y in zip(a, b, strict=True) if y > 0]
+        if not ratios:
+            continue
+        spread = f"{statistics.median(ratios):.3f} [{min(ratios):.2f}, {max(ratios):.2f}]"
+        print(f"{stage:9s} {statistics.median(a):7.1f} {statistics.median(b):7.1f}  {spread:28s} {min(a) / min(b):.3f}")
+
+
+if __name__ == "__main__":
+    main()
