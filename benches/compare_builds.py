@@ -8,8 +8,11 @@ wheel: `maturin build --release`). Both step the same dam break (`augmpm.bench.d
 once each, `--steps` steps a round, in alternating order (A B, B A, …), so that the machine's drift and
 the run order fall on both alike. Printed per stage (the engine's stage timers, ns a particle-step): the
 median of each build, the median and range of the round-by-round ratio A/B, and the ratio of the fastest
-rounds (on a shared machine interference only ever slows a round down). Whole-process timings include
+rounds (on a shared machine interference mostly slows a round down). Whole-process timings include
 start-up and scene building; this does not.
+
+The scene is built by the installed `augmpm`: both builds must read its scene format. The same file given
+twice is one library, loaded once: the two then share an engine module (an A/A run).
 """
 
 from __future__ import annotations
@@ -42,12 +45,16 @@ def main() -> None:
     parser.add_argument("--resolution", type=int, default=256, help="dam break grid: 128, 256 or 512")
     parser.add_argument("--method", default="naive", choices=["naive", "augmented"])
     parser.add_argument("--steps", type=int, default=10, help="steps a round")
-    parser.add_argument("--rounds", type=int, default=60, help="rounds of each build")
+    parser.add_argument("--rounds", type=int, default=60, help="rounds of each build (even: each goes first as often)")
     parser.add_argument("--threads", type=int, default=1)
     args = parser.parse_args()
     for path in (args.new, args.old):
         if not path.is_file():
             parser.error(f"{path}: no such extension file")
+    if args.rounds < 2 or args.rounds % 2:
+        parser.error(f"--rounds {args.rounds}: must be a positive even number (each build goes first as often)")
+    if args.steps < 1:
+        parser.error(f"--steps {args.steps}: must be at least 1")
     scene = bench.dam_break_scene(args.resolution).to_json()
     sims = {
         label: load_engine(label, path).Simulation(scene, args.method, args.threads, memory_limit())
@@ -55,7 +62,6 @@ def main() -> None:
     }
     for sim in sims.values():
         sim.step(3)
-    per = sims["A"].num_particles * args.steps / 1e9
     rounds: dict[str, list[dict[str, float]]] = {"A": [], "B": []}
     for r in range(args.rounds):
         for label in ("A", "B") if r % 2 == 0 else ("B", "A"):
@@ -64,6 +70,7 @@ def main() -> None:
             sim.step(args.steps)
             total = time.perf_counter() - start
             after = sim.stage_times()
+            per = sim.num_particles * args.steps / 1e9
             rounds[label].append({"step": total / per, **{k: (after[k] - before[k]) / per for k in after}})
     print(
         f"dam break {args.resolution}², {args.method}, {args.threads} thread(s), {args.rounds} rounds of "
@@ -74,7 +81,7 @@ def main() -> None:
         a = [row[stage] for row in rounds["A"]]
         b = [row[stage] for row in rounds["B"]]
         ratios = [x / y for x, y in zip(a, b, strict=True) if y > 0]
-        if not ratios:
+        if not ratios or min(b) <= 0:
             continue
         spread = f"{statistics.median(ratios):.3f} [{min(ratios):.2f}, {max(ratios):.2f}]"
         print(f"{stage:9s} {statistics.median(a):7.1f} {statistics.median(b):7.1f}  {spread:28s} {min(a) / min(b):.3f}")

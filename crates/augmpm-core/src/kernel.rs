@@ -41,7 +41,7 @@ impl<const D: usize> Stencil<D> {
     }
 
     /// Calls `f(i, weight, x_i − x_p)` for every node of the stencil, in the order of
-    /// [`Stencil::for_each`], with `i = origin + Σ_k o_k strides_k` the node's index in a grid of those
+    /// [`Stencil::for_each`], with `i = origin + Σ_k o_k strides_k ≤ origin + Σ_k 2 strides_k` the node's index in a grid of those
     /// strides whose stencil origin is `origin`.
     #[inline]
     pub fn for_each_index(
@@ -56,8 +56,11 @@ impl<const D: usize> Stencil<D> {
 
     /// Calls `f(offset, i − origin, weight, x_i − x_p)` for every node of the stencil, in the order of
     /// [`Stencil::for_each`]: nested per axis in 2D and 3D, a row of three nodes along the first axis
-    /// innermost, with what is constant along the row (the other axes' weights, offsets and index) taken
-    /// out of it. The weight is the product `((1·w₀)·w₁)·w₂` in that order (`1·w₀ = w₀` exactly).
+    /// innermost, with the other axes' weights, offsets and index read once a row. The weight is the
+    /// product `((1·w₀)·w₁)·w₂` in that order (`1·w₀ = w₀` exactly), formed at each node.
+    ///
+    /// Every offset component is 0, 1 or 2, so `i − origin ≤ Σ_k 2 strides_k`: the transfers check that
+    /// last node once and index the others unchecked, relying on this bound.
     #[inline(always)]
     pub fn visit(&self, h: Real, strides: &[usize; D], mut f: impl FnMut([usize; D], usize, Real, Vector<D>)) {
         let mut dk = [[0.0; 3]; D];

@@ -421,7 +421,7 @@ impl<const D: usize> Schedule<D> {
 /// Whether the whole stencil of a particle at `x` is inside the grid: its lowest node, at index
 /// `floor(y) + GHOST` with `y = x/h − 1/2`, at 0 or above, and its highest, two further, below `dims`.
 /// The bounds are integers, so that is `−GHOST ≤ y < dims − 2 − GHOST`, compared without the floor
-/// (NaN and the infinities fail it, as they must).
+/// (NaN and the infinities fail it, as they must). `inv_h` is finite and positive (scenes have h > 0).
 #[inline]
 pub fn stencil_in_grid<const D: usize>(layout: &GridLayout<D>, x: &Vector<D>, inv_h: Real) -> bool {
     use crate::grid::GHOST;
@@ -453,7 +453,8 @@ mod tests {
 
     /// `stencil_in_grid` is the floor-based definition (lowest node `floor(x/h − 1/2) + GHOST` at 0 or
     /// above, highest below `dims`, x finite) at every position: random ones, each node and cell centre
-    /// across the grid's edges and just beside them, and the non-finite values.
+    /// across the grid's edges, the exact bounds, each of those with its nearest floats, huge values and
+    /// the non-finite ones.
     #[test]
     fn stencil_in_grid_is_the_floor_definition() {
         let layout = GridLayout::<2>::new(0.1, [8, 5]);
@@ -464,13 +465,28 @@ mod tests {
                 x[k].is_finite() && o >= 0 && (o as usize) + 2 < layout.dims[k]
             })
         };
-        let mut coords: Vec<Real> =
-            vec![Real::NAN, Real::INFINITY, Real::NEG_INFINITY, Real::MAX, -Real::MAX, 0.0, -0.0];
-        // Nodes and cell centres from 5 cells below the grid to 10 past it, and a few ulps to either side.
-        for i in -10..=40 {
+        // Bits one to three ulps to either side of `c` (`next_up` is newer than the crate's minimum Rust).
+        let beside = |c: Real| {
+            (1..=3).flat_map(move |k| {
+                [Real::from_bits(c.to_bits().wrapping_add(k)), Real::from_bits(c.to_bits().wrapping_sub(k))]
+            })
+        };
+        // The non-finite values, and finite ones far enough out that the floor takes its saturating cast.
+        let mut coords: Vec<Real> = vec![Real::NAN, Real::INFINITY, Real::NEG_INFINITY, Real::MAX, -Real::MAX];
+        coords.extend([1e18, -1e18, 1e30, -1e30, 4.6e15, -4.6e15]);
+        // Nodes and cell centres every h/2 from 5 cells below the box to 15 cells past its origin, with their
+        // neighbours (0's are −0 and the smallest subnormals of either sign).
+        for i in -10..=30 {
             let c = i as Real * 0.5 * layout.h;
-            let ulps = 4.0 * Real::EPSILON * c.abs().max(1.0);
-            coords.extend([c, c + ulps, c - ulps]);
+            coords.push(c);
+            coords.extend(beside(c));
+        }
+        // The exact bounds −2 ≤ y < dims − 4 (y = x/h − 1/2; dims = 13 and 10 with the ghost nodes), and
+        // their neighbours.
+        for y in [-2.0, layout.dims[0] as Real - 4.0, layout.dims[1] as Real - 4.0] {
+            let x = (y + 0.5) * layout.h;
+            coords.push(x);
+            coords.extend(beside(x));
         }
         coords.extend(scattered(500, 3).iter().map(|p| ((p.x - 0.25) * 1.5) as Real));
         let mut inside = 0;

@@ -598,7 +598,7 @@ where
                 // SAFETY: as above.
                 unsafe { f.update(p, |fq| *fq = fp) };
             }
-            // `a · 0` is 0 for a finite `a` and NaN otherwise, so the sum is 0 exactly when all are finite
+            // `a · 0` is ±0 for a finite `a` and NaN otherwise, so the sum is ±0 exactly when all are finite
             // (no branch per value). The particle's kinetic energy must be representable too, or the
             // run's energy is garbage.
             let finite = xp.iter().chain(vp.iter()).chain(fp.iter()).fold(0.0, |s: Real, &a| s + a * 0.0) == 0.0
