@@ -41,8 +41,8 @@ impl<const D: usize> Stencil<D> {
     }
 
     /// Calls `f(i, weight, x_i − x_p)` for every node of the stencil, in the order of
-    /// [`Stencil::for_each`], with `i = origin + Σ_k o_k strides_k ≤ origin + Σ_k 2 strides_k` the node's index in a grid of those
-    /// strides whose stencil origin is `origin`.
+    /// [`Stencil::for_each`], with `i = origin + Σ_k o_k strides_k` the node's index in a grid of those
+    /// strides whose stencil origin is `origin` (at most `origin + Σ_k 2 strides_k`, see [`Stencil::visit`]).
     #[inline]
     pub fn for_each_index(
         &self,
