@@ -190,3 +190,24 @@ def test_roofline_table_reads_the_machine_roofs():
     lines = bench._roofline({"roofs": {"bandwidth_GBps": 10.0, "peak_GFLOPs": 50.0, "threads": 1}}, [row])
     # density: 36 B x 1,000 particles x 10 steps in 1 ms = 0.36 GB/s, 4% of 10 GB/s.
     assert "| dam_break_128 f64 naive 1t | 36 B / 0.4 (4%) | 100 B / 0.5 (5%) | – |" in lines
+
+
+def test_compare_builds_alternates_two_builds_in_one_process():
+    """benches/compare_builds.py steps a dam break with each build and prints, per stage, the two medians and
+    the ratios: the same build against itself gives a step time and ratios near 1; an odd --rounds is refused."""
+    import subprocess
+    import sys
+
+    script = ROOT / "benches" / "compare_builds.py"
+    engine = augmpm._core.__file__
+    args = [sys.executable, str(script), engine, engine, "--resolution", "128", "--steps", "5"]
+    run = subprocess.run([*args, "--rounds", "4"], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    rows = {line.split()[0]: line.split()[1:] for line in run.stdout.splitlines()[2:]}
+    assert {"step", "p2g", "g2p"} <= rows.keys()
+    a, b, median, fastest = (float(rows["step"][i].strip("[],")) for i in (0, 1, 2, 5))
+    assert a > 0 and b > 0
+    # One engine twice: only the machine's noise separates the rounds (single rounds vary up to 2× here).
+    assert 0.3 < median < 3 and 0.3 < fastest < 3
+    refused = subprocess.run([*args, "--rounds", "3"], capture_output=True, text=True, timeout=60)
+    assert refused.returncode == 2 and "--rounds 3" in refused.stderr
