@@ -532,16 +532,17 @@ def machine_roofs(threads: int, mebibytes: int = 64) -> dict:
 def stage_bytes(precision: str, dim: int, keeps_f: bool = False) -> dict[str, int]:
     """Bytes of particle data each per-particle stage of a fluid step reads and writes, per particle
     (the engine's per-particle arrays: x, v, c, F where a material keeps it, J, mass, V0, body, density;
-    grid nodes are not counted, their 3^D per particle stay in cache). ``density`` reads x, V0, J and body;
-    ``p2g`` reads x, v, c, (F), J, mass, V0, body and writes the density; ``g2p`` reads x, v, c, (F), J,
-    body, mass and the density, and writes x, v, c, (F) and J."""
+    grid nodes are not counted, their 3^D per particle stay in cache). ``density`` moves nothing: it is the
+    grid density's mass scatter, and the bench fluid's density is ρ0/J (the default), whose J-bar sums ride
+    on P2G and G2P; ``p2g`` reads x, v, c, (F), J, mass, V0, body and writes the density; ``g2p`` reads x,
+    v, c, (F), J, body and mass, and writes x, v, c, (F) and J."""
     r = 4 if precision == "f32" else 8
     vector, matrix, index = dim * r, dim * dim * r, 4
     f = matrix if keeps_f else 0
     return {
-        "density": vector + 2 * r + index,
+        "density": 0,
         "p2g": 2 * vector + matrix + f + 3 * r + index + r,
-        "g2p": (2 * vector + matrix + f + 2 * r + index + r) + (2 * vector + matrix + f + r),
+        "g2p": (2 * vector + matrix + f + r + index + r) + (2 * vector + matrix + f + r),
     }
 
 
@@ -737,7 +738,7 @@ def _roofline(report: dict, rows: list[dict]) -> list[str]:
         cells = []
         for stage in stages:
             seconds = r["stages_s"].get(stage, 0.0)
-            if seconds <= 0:
+            if seconds <= 0 or moved[stage] == 0:
                 cells.append("–")
                 continue
             rate = moved[stage] * r["particles"] * r["steps"] / seconds / 1e9

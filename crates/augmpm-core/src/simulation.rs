@@ -12,7 +12,7 @@ use crate::parallel::Disjoint;
 use crate::particles::{Column, ColumnMut, Field, FieldKind, Particles};
 use crate::rigid::{drift, RigidBody};
 use crate::step::schedule::{Binning, Schedule};
-use crate::step::transfer::{self, G2pOutcome, GridDensity, Transfer};
+use crate::step::transfer::{self, G2pOutcome, GridDensity, Transfer, VolumeRatio};
 use crate::treatment::augmented::WallParticles;
 use crate::treatment::wall_fit::WallPush;
 use crate::treatment::{Boundary, WallTreatment};
@@ -150,7 +150,8 @@ pub struct State<const D: usize> {
     /// Largest move of a particle in the last step (cell widths).
     pub max_cfl: Real,
     pub particles: Particles<D>,
-    /// Density of each particle in the last step (ρ0/J̄ or the grid's; see [`Simulation::grid_density`]).
+    /// Density of each particle in the last step (ρ0/J with the particle's J, or the grid's; see
+    /// [`Simulation::grid_density`]).
     pub density: Vec<Real>,
     /// The block each particle was binned in, and how far the particles may have moved since.
     pub binning: Binning,
@@ -324,10 +325,9 @@ struct Scratch<const D: usize> {
     grid: GridState<D>,
     /// B-spline grid mass of the density estimate (fluids only; empty otherwise).
     density_mass: Vec<Real>,
-    /// Per node, rest volume and rest volume·J of the particles whose J is smoothed (empty when none is), and per
-    /// material whether its particles take part.
-    volume_ratio: Vec<(Real, Real)>,
-    smooths: Vec<bool>,
+    /// Per node, rest volume and rest volume·J of the particles whose J is smoothed (empty when none is);
+    /// after the grid update, their ratio J in the second place.
+    volume_ratio: VolumeRatio,
     /// Particles whose MLS system sees a wall, with their inverses (augmented grid only).
     walls: WallParticles<D>,
     /// The impulse each wall gave each particle of `walls` in G2P.
@@ -365,22 +365,12 @@ impl<const D: usize> Scratch<D> {
         Ok(())
     }
 
-    /// The node sums of the fluids' density estimate, where a material needs them: rest volume and
-    /// rest volume·J of the particles whose J is smoothed, and the grid mass of the `grid` estimate.
+    /// The grid mass of the fluids' `grid` density estimate, where a material needs it; and the volume
+    /// ratio sums, which P2G scatters, cleared.
     fn scatter_density(&mut self, layout: &GridLayout<D>, particles: &Particles<D>) {
-        let Self { schedule, volume_ratio, density_mass, smooths, .. } = self;
+        let Self { schedule, volume_ratio, density_mass, .. } = self;
         if !volume_ratio.is_empty() {
-            schedule.clear(layout, schedule.stale(), volume_ratio, (0.0, 0.0));
-            let body = &particles.body;
-            transfer::scatter_volume_ratio(
-                layout,
-                schedule,
-                &particles.x,
-                &particles.vol0,
-                &particles.jp,
-                |p| smooths[body[p] as usize],
-                volume_ratio,
-            );
+            volume_ratio.clear(layout, schedule, schedule.stale());
         }
         if !density_mass.is_empty() {
             schedule.clear(layout, schedule.stale(), density_mass, 0.0);
@@ -526,11 +516,10 @@ where
             grid: GridState::new(model.boundary.num_points(&model.layout)),
             density_mass: if density { vec![0.0; model.layout.num_nodes()] } else { Vec::new() },
             volume_ratio: if model.smooths_volume_ratio() {
-                vec![(0.0, 0.0); model.layout.num_nodes()]
+                VolumeRatio::new(model.layout.num_nodes())
             } else {
-                Vec::new()
+                VolumeRatio::default()
             },
-            smooths: model.materials.iter().map(ConstitutiveModel::<D>::smooths_volume_ratio).collect(),
             walls: WallParticles::default(),
             pushes: Vec::new(),
             step_impulse: WallImpulses::zeros(model.boundary.contacts().len()),
@@ -600,7 +589,7 @@ where
             particle_scratch: s.schedule.particle_bytes() + s.walls.heap_bytes() + b(&s.pushes),
             grid: s.grid.heap_bytes()
                 + b(&s.density_mass)
-                + b(&s.volume_ratio)
+                + s.volume_ratio.heap_bytes()
                 + s.schedule.block_bytes()
                 + self.model.wall_fraction.as_ref().map_or(0, b)
                 + boundary,
@@ -739,7 +728,7 @@ where
         grid.spline_mass.fill(0.0);
         grid.momentum.fill(Vector::<D>::zeros());
         self.scratch.density_mass.fill(0.0);
-        self.scratch.volume_ratio.fill((0.0, 0.0));
+        self.scratch.volume_ratio.fill_zero();
         Ok(())
     }
 
@@ -772,28 +761,27 @@ where
 
         let Scratch { schedule, grid, density_mass, volume_ratio, walls, pushes, step_impulse, .. } = scratch;
         let t = Transfer { layout, schedule, augmented: model.boundary.transfer_view(walls) };
-        let grid_density = (!density_mass.is_empty() || !volume_ratio.is_empty()).then(|| GridDensity {
-            grid_mass: density_mass,
-            wall_fraction: model.wall_fraction.as_deref(),
-            volume_ratio,
-        });
-        // 4. P2G: mass, momentum and the stress force.
-        transfer::p2g(&t, &model.materials, &state.particles, grid_density, &mut state.density, dt, grid);
+        let grid_density = (!density_mass.is_empty())
+            .then(|| GridDensity { grid_mass: density_mass, wall_fraction: model.wall_fraction.as_deref() });
+        // 4. P2G: mass, momentum and the stress force; the volume ratio sums of the J-bar average.
+        transfer::p2g(&t, &model.materials, &state.particles, grid_density, &mut state.density, dt, grid, volume_ratio);
         lap.add_to(&mut times.p2g);
-        // 5. Grid update (momentum → velocity, gravity), then the walls' conditions.
+        // 5. Grid update (momentum → velocity, gravity), then the walls' conditions; the nodes' J.
         state.low_mass_nodes += transfer::grid_velocity(&t, grid, &model.gravity, dt) as u64;
+        if !volume_ratio.is_empty() {
+            volume_ratio.finish(layout, schedule);
+        }
         step_impulse.clear();
         model.boundary.apply(layout, model.region.as_ref(), &grid.mass, &mut grid.momentum, step_impulse);
         lap.add_to(&mut times.grid);
-        // 6. G2P, advection and the deformation update (only materials that smooth their J read
-        // it back from the density).
-        let smoothed: &[Real] = if volume_ratio.is_empty() { &[] } else { &state.density };
+        // 6. G2P, advection and the deformation update (with the J-bar average of the J it advances, for
+        // the materials that smooth it).
         let outcome = transfer::g2p(
             &t,
             model.region.as_ref(),
             &model.materials,
             &grid.momentum,
-            smoothed,
+            volume_ratio,
             &mut state.particles,
             dt,
             pushes,
@@ -988,7 +976,8 @@ where
     }
 
     /// Density (kg/m³, or kg/m² in 2D) of each particle in the last step, as its material saw it
-    /// (fluids: ρ0/J̄ or gathered from the regular grid), zero before the first step.
+    /// (fluids: ρ0/J with J the particle's volume ratio, or gathered from the regular grid), zero before
+    /// the first step.
     pub fn grid_density(&self) -> &[Real] {
         &self.state.density
     }

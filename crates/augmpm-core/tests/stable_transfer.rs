@@ -9,7 +9,7 @@ use augmpm_core::material::{Material, WeaklyCompressibleFluid};
 use augmpm_core::math::{Dim, Real};
 use augmpm_core::particles::Particles;
 use augmpm_core::step::schedule::{Binning, Schedule};
-use augmpm_core::step::transfer::{g2p, grid_velocity, p2g, Transfer};
+use augmpm_core::step::transfer::{g2p, grid_velocity, p2g, Transfer, VolumeRatio};
 use augmpm_core::treatment::augmented::{AugmentedGrid, AugmentedTransfer, WallParticles};
 use augmpm_core::wall::WallCondition;
 use nalgebra::{Matrix2, Vector2};
@@ -130,14 +130,14 @@ fn round_trip(s: &Setup, ps: &mut Particles<2>, walls_act: bool) -> GridState<2>
     let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
     let mut state = GridState::new(s.layout.num_nodes() + s.grid.points.len());
     let mut density = vec![0.0; ps.len()];
-    p2g(&t, &dust(), ps, None, &mut density, 1e-3, &mut state);
+    p2g(&t, &dust(), ps, None, &mut density, 1e-3, &mut state, &mut VolumeRatio::default());
     let after_p2g = state.clone();
     grid_velocity(&t, &mut state, &Point::zeros(), 1e-3);
     if walls_act {
         s.grid.apply(&state.mass, &mut state.momentum, &mut augmpm_core::wall::WallImpulses::zeros(s.grid.walls.len()));
-        g2p(&t, &s.walls, &dust(), &state.momentum, &[], ps, 0.0, &mut Vec::new());
+        g2p(&t, &s.walls, &dust(), &state.momentum, &VolumeRatio::default(), ps, 0.0, &mut Vec::new());
     } else {
-        g2p(&t, &NoFeet(&s.walls), &dust(), &state.momentum, &[], ps, 0.0, &mut Vec::new());
+        g2p(&t, &NoFeet(&s.walls), &dust(), &state.momentum, &VolumeRatio::default(), ps, 0.0, &mut Vec::new());
     }
     after_p2g
 }
@@ -216,7 +216,7 @@ proptest! {
         let mut velocity: Vec<Point> = (0..s.layout.num_nodes()).map(|i| field(&s.layout.position(i))).collect();
         velocity.extend(s.grid.points.iter().map(|b| field(&b.x)));
         let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
-        g2p(&t, &s.walls, &dust(), &velocity, &[], &mut ps, 0.0, &mut Vec::new());
+        g2p(&t, &s.walls, &dust(), &velocity, &VolumeRatio::default(), &mut ps, 0.0, &mut Vec::new());
         for p in 0..ps.len() {
             prop_assert!((ps.v[p] - field(&ps.x[p])).norm() <= 1e-10, "v {} vs {}", ps.v[p], field(&ps.x[p]));
             prop_assert!((affine(&s, &ps, p) - gradient).norm() <= 1e-8, "C {} vs {}", affine(&s, &ps, p), gradient);
@@ -240,7 +240,7 @@ fn particles_keep_their_spin_across_a_move() {
         let grid_l = |s: &Setup, ps: &Particles<2>| {
             let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
             let mut state = GridState::new(s.layout.num_nodes() + s.grid.points.len());
-            p2g(&t, &dust(), ps, None, &mut vec![0.0; ps.len()], 1e-3, &mut state);
+            p2g(&t, &dust(), ps, None, &mut vec![0.0; ps.len()], 1e-3, &mut state, &mut VolumeRatio::default());
             let position = |i: usize| {
                 if i < s.layout.num_nodes() {
                     s.layout.position(i)
@@ -267,7 +267,7 @@ fn particles_keep_their_spin_across_a_move() {
             1e-3,
         );
         let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
-        g2p(&t, &NoFeet(&s.walls), &dust(), &state.momentum, &[], &mut ps, 1e-3, &mut Vec::new());
+        g2p(&t, &NoFeet(&s.walls), &dust(), &state.momentum, &VolumeRatio::default(), &mut ps, 1e-3, &mut Vec::new());
         assert!((own(&ps) - l0).abs() <= 1e-12 * scale, "{angle}°: G2P and the move {} vs {l0}", own(&ps));
         let moved = setup(walls, WallCondition::Sticky, &ps, AugmentedTransfer::Stable);
         let (l1, _) = grid_l(&moved, &ps);
@@ -291,7 +291,7 @@ fn normal_velocity_vanishes_linearly_at_the_wall() {
         let s = setup(walls, cond, &ps, AugmentedTransfer::Stable);
         let velocity = vec![-normal_in; s.layout.num_nodes() + s.grid.points.len()];
         let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
-        g2p(&t, &s.walls, &dust(), &velocity, &[], &mut ps, 0.0, &mut Vec::new());
+        g2p(&t, &s.walls, &dust(), &velocity, &VolumeRatio::default(), &mut ps, 0.0, &mut Vec::new());
         let normal: Vec<Real> = ps.v.iter().map(|v| v.dot(&normal_in).abs()).collect();
         for k in 1..distances.len() {
             assert!(normal[k] <= normal[k - 1] / 5.0, "{cond:?}: |v·n| at d = {:?} h: {normal:?}", distances);
