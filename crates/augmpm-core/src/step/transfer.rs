@@ -286,7 +286,7 @@ pub fn p2g<const D: usize>(
                 rho = density_at(layout, &s, origin, g.grid_mass, g.wall_fraction);
             }
             // The particle's rest volume and volume, when its J is smoothed.
-            let jbar = (smoothing && material.smooths_volume_ratio())
+            let volumes = (smoothing && material.smooths_volume_ratio())
                 .then(|| (particles.vol0[p], particles.vol0[p] * particles.jp[p]));
             let point = MaterialPoint {
                 f: particles.deformation_gradient(p),
@@ -303,10 +303,10 @@ pub fn p2g<const D: usize>(
             let (mp, vp, cp) = (particles.mass[p], particles.v[p], particles.c[p]);
             match t.augmented.and_then(|(g, table)| table.entry(p).map(|e| (g, e))) {
                 None => {
-                    let node = RegularNode { mp, mv: vp * mp, affine: cp * mp - stress * apic, jbar };
+                    let node = RegularNode { mp, mv: vp * mp, affine: cp * mp - stress * apic, volumes };
                     // SAFETY: exclusive as stated above.
                     unsafe {
-                        match (track_spline, jbar.is_some()) {
+                        match (track_spline, volumes.is_some()) {
                             (false, false) => out.scatter_regular::<false, false>(layout, &s, origin, &node),
                             (false, true) => out.scatter_regular::<false, true>(layout, &s, origin, &node),
                             (true, false) => out.scatter_regular::<true, false>(layout, &s, origin, &node),
@@ -315,10 +315,10 @@ pub fn p2g<const D: usize>(
                     }
                 }
                 Some((g, entry @ WallEntry { minv, near, total, tilt, .. })) => {
-                    if let Some(jbar) = jbar {
+                    if let Some(volumes) = volumes {
                         // J is smoothed over the regular grid, near walls too.
                         // SAFETY: exclusive as stated above.
-                        unsafe { out.scatter_volume(layout, &s, origin, jbar) };
+                        unsafe { out.scatter_volume(layout, &s, origin, volumes) };
                     }
                     let mut force = stress * dt;
                     if g.transfer == AugmentedTransfer::Stable
@@ -374,7 +374,7 @@ struct RegularNode<const D: usize> {
     mp: Real,
     mv: Vector<D>,
     affine: Matrix<D>,
-    jbar: Option<(Real, Real)>,
+    volumes: Option<(Real, Real)>,
 }
 
 impl<const D: usize> P2gOut<'_, D> {
@@ -392,8 +392,8 @@ impl<const D: usize> P2gOut<'_, D> {
         node: &RegularNode<D>,
     ) {
         let Self { mass, spline, momentum, volume_ratio } = self;
-        let RegularNode { mp, mv, affine, jbar } = *node;
-        let (v0, v0j) = jbar.unwrap_or_default();
+        let RegularNode { mp, mv, affine, volumes } = *node;
+        let (v0, v0j) = volumes.unwrap_or_default();
         // The farthest node of the stencil: one bounds check for the 3^D writes.
         let last = last_node(layout, origin);
         assert!(last < mass.len() && last < momentum.len());
@@ -415,12 +415,13 @@ impl<const D: usize> P2gOut<'_, D> {
         });
     }
 
-    /// Scatters `w (V⁰_p, V⁰_p J_p)` (`jbar`) over a particle's stencil to the volume ratio sums.
+    /// Scatters `w (V⁰_p, V⁰_p J_p)` (`volumes`) over a particle's stencil to the volume ratio sums.
     ///
     /// # Safety
     /// No other thread writes the stencil's nodes meanwhile.
     #[inline]
-    unsafe fn scatter_volume(&self, layout: &GridLayout<D>, s: &Stencil<D>, origin: usize, (v0, v0j): (Real, Real)) {
+    unsafe fn scatter_volume(&self, layout: &GridLayout<D>, s: &Stencil<D>, origin: usize, volumes: (Real, Real)) {
+        let (v0, v0j) = volumes;
         assert!(last_node(layout, origin) < self.volume_ratio.len());
         // SAFETY: i ≤ the stencil's last node, in bounds (checked above); exclusive by the caller.
         s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| unsafe {
