@@ -96,8 +96,9 @@ class Simulation:
 
     @property
     def densities(self) -> np.ndarray:
-        """Fluid density of each particle in the last step (kg/m² in 2D), shape (N,): ρ0/J (smoothed J) with
-        ``density_estimate = "deformation"``, gathered from the regular grid with ``"grid"``."""
+        """Fluid density of each particle in the last step (kg/m² in 2D), shape (N,): ρ0/J with the J its stress
+        saw (the one the step before averaged over the grid and advanced) with ``density_estimate =
+        "deformation"``, gathered from the regular grid with ``"grid"``."""
         return self._sim.densities
 
     def particle_fields(self) -> dict[str, np.ndarray]:

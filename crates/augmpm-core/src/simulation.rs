@@ -412,15 +412,16 @@ fn failure(step: u64, outcome: &G2pOutcome, cells: Real, cause: impl FnOnce() ->
 pub struct StageTimes {
     /// Binning particles by block, clearing the grid.
     pub sort: f64,
-    /// Grid mass and density estimate (fluids).
+    /// The grid density's mass scatter (fluids with `density_estimate = "grid"`), and clearing the J-bar
+    /// sums.
     pub density: f64,
     /// Boundary-point lookups and per-particle MLS inverses (augmented grid).
     pub boundary: f64,
-    /// Particle→grid transfer, stress included.
+    /// Particle→grid transfer, stress and the J-bar sums included.
     pub p2g: f64,
-    /// Grid velocity update and wall conditions.
+    /// Grid velocity update, the nodes' J (J-bar) and wall conditions.
     pub grid: f64,
-    /// Grid→particle transfer, advection and deformation update.
+    /// Grid→particle transfer, the J-bar gather, advection and deformation update.
     pub g2p: f64,
 }
 
@@ -751,7 +752,7 @@ where
         // 1. Bin the particles again if due; clear the grid where the last step left values.
         scratch.prepare_grid(layout, &state.particles.x, &mut state.binning).map_err(left)?;
         lap.add_to(&mut times.sort);
-        // 2. The node sums of the fluids' density estimate.
+        // 2. The grid density's mass (fluids with the paper's density); the J-bar sums cleared.
         scratch.scatter_density(layout, &state.particles);
         lap.add_to(&mut times.density);
         // 3. The walls prepare for this step (augmented: the MLS systems of eq. (5) near walls).
