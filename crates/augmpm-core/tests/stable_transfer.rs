@@ -300,6 +300,41 @@ fn normal_velocity_vanishes_linearly_at_the_wall() {
     }
 }
 
+/// The J-bar average keeps the total volume Σ V⁰J next to walls too: particles in the wall table scatter
+/// and gather J over the regular stencil like the others (relative 1e-12: sums of a few thousand O(1)
+/// terms), and a uniform J comes back unchanged (1e-14).
+#[test]
+fn volume_ratio_average_keeps_the_volume_next_to_walls() {
+    use augmpm_core::material::DensityEstimate;
+    let (walls, origin, along) = tilted_container(20f64.to_radians(), 0.12);
+    let mut ps = particles_near_floor(origin, along, 300, 4.0 * H, 3);
+    let s = setup(walls, WallCondition::Slip, &ps, AugmentedTransfer::Stable);
+    assert!(s.table.len() > 50, "{} particles see the wall", s.table.len());
+    let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
+    let fluid = vec![Material::Fluid(WeaklyCompressibleFluid {
+        density_estimate: DensityEstimate::Deformation,
+        ..WeaklyCompressibleFluid::dust(1.0)
+    })];
+    for uniform in [true, false] {
+        for p in 0..ps.len() {
+            ps.vol0[p] = 0.5 + 0.001 * (p % 997) as Real;
+            ps.jp[p] = if uniform { 1.1 } else { 0.9 + 0.2 * ((p * 37) % 101) as Real / 101.0 };
+        }
+        let volume: Real = ps.vol0.iter().zip(&ps.jp).map(|(v, j)| v * j).sum();
+        let mut state = GridState::new(s.layout.num_nodes() + s.grid.points.len());
+        let mut ratio = VolumeRatio::new(s.layout.num_nodes());
+        p2g(&t, &fluid, &ps, None, &mut vec![0.0; ps.len()], 1e-3, &mut state, &mut ratio);
+        grid_velocity(&t, &mut state, &Point::zeros(), 1e-3);
+        ratio.finish(&s.layout, &s.schedule);
+        g2p(&t, &NoFeet(&s.walls), &fluid, &state.momentum, &ratio, &mut ps, 0.0, &mut Vec::new());
+        let after: Real = ps.vol0.iter().zip(&ps.jp).map(|(v, j)| v * j).sum();
+        assert!((after - volume).abs() < 1e-12 * volume, "total volume {after} vs {volume}");
+        if uniform {
+            assert!(ps.jp.iter().all(|&j| (j - 1.1).abs() < 1e-14), "a uniform J changed");
+        }
+    }
+}
+
 /// Repeated round trips with the particles held still amplify the transfer's dominant mode (power
 /// iteration, the energy rescaled after each trip): even that mode loses energy in a trip, and no
 /// grid point ever gets a negative mass.
