@@ -52,9 +52,9 @@ pub fn scatter_mass<const D: usize>(
 /// Empty when no material smooths its J.
 #[derive(Clone, Debug, Default)]
 pub struct VolumeRatio {
-    /// Per node, the two sums side by side (one cache line for P2G's two updates: as fast as the
-    /// gather of the ratio alone from an array of its own, and P2G's stores faster, measured); after
-    /// [`VolumeRatio::finish`], the second is the node's J.
+    /// Per node, the two sums side by side (one cache line for P2G's two updates). Two arrays of their
+    /// own, so that G2P reads only the ratios, were measured with the sums scattered in the momentum's
+    /// loop: G2P no faster, P2G slower. After [`VolumeRatio::finish`], the second is the node's J.
     pub nodes: Vec<(Real, Real)>,
 }
 
