@@ -136,10 +136,10 @@ def test_a_checkpoint_is_never_ahead_of_the_rows_on_disk(small_scene, tmp_path, 
             time.sleep(0.1)
         return commit(self, wait, rewrite)
 
-    def checked(path, sim, meta):
+    def checked(path, state, meta):
         with open(path.parent / "metrics.csv", newline="") as fh:
             seen.append((meta["frame"], len(list(csv.DictReader(fh)))))
-        return save_checkpoint(path, sim, meta)
+        return save_checkpoint(path, state, meta)
 
     monkeypatch.setattr(run, "_write_frame", slow_frame)
     monkeypatch.setattr(run, "write_text", slow_text)
@@ -149,6 +149,47 @@ def test_a_checkpoint_is_never_ahead_of_the_rows_on_disk(small_scene, tmp_path, 
     augmpm.run_scene(augmpm.Scene.from_dict(small_scene), tmp_path / "run", progress=False, render=False,
                      checkpoint_every=checkpoint_every)  # fmt: skip
     assert seen and all(rows >= frame + 1 for frame, rows in seen), seen
+
+
+def test_a_checkpoint_does_not_hold_the_simulation_back(small_scene, tmp_path, monkeypatch):
+    """A checkpoint waits for the frames still being written on the files' thread, not the simulation: the
+    first frame's files (a checkpoint's frame) are held back until the simulation has stepped two frames past
+    it, and the checkpoint still lands with the rows it implies on disk."""
+    import threading
+
+    import augmpm.run
+
+    small_scene["time"].update(steps=60, output_interval=10)
+    run = augmpm.run
+    write_frame, save_checkpoint, step = run._write_frame, run.save_checkpoint, run.Simulation.step
+    ahead = threading.Event()
+    held, seen = [], []
+
+    def held_frame(out, name, *args):
+        if name == "frame_00000":
+            # Set by the simulation's thread; were it waiting for this frame, it would never be.
+            held.append(ahead.wait(timeout=20))
+        return write_frame(out, name, *args)
+
+    def stepping(self, n=1):
+        step(self, n)
+        if self.steps_done >= 20:
+            ahead.set()
+
+    def checked(path, state, meta):
+        with open(path.parent / "metrics.csv", newline="") as fh:
+            seen.append((meta["frame"], len(list(csv.DictReader(fh)))))
+        return save_checkpoint(path, state, meta)
+
+    monkeypatch.setattr(run, "_write_frame", held_frame)
+    monkeypatch.setattr(run.Simulation, "step", stepping)
+    monkeypatch.setattr(run, "save_checkpoint", checked)
+    augmpm.run_scene(augmpm.Scene.from_dict(small_scene), tmp_path / "run", progress=False, render=False,
+                     checkpoint_every=1)  # fmt: skip
+    assert held == [True]
+    assert seen and all(rows >= frame + 1 for frame, rows in seen), seen
+    meta, _ = run.load_checkpoint(tmp_path / "run" / run.CHECKPOINT)
+    assert meta["frame"] == 6
 
 
 def test_a_metrics_file_that_cannot_be_written_stops_the_run(small_scene, tmp_path, monkeypatch):

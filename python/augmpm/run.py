@@ -235,6 +235,8 @@ class _Run:
         self.metrics_writes: list[Future] = []
         # How many committed rows have been handed to the files' thread for metrics.csv and bodies.csv.
         self.rows_sent = 0
+        # Checkpoints taken and not yet written, oldest first: (frame, state, meta).
+        self.checkpoints: deque[tuple[int, dict, dict]] = deque()
         self.total = int(meta["total_steps"])
         self.vtk_frames = [(float(r["time"]), f"vtk/frame_{i:05d}.vtp") for i, r in enumerate(rows)]
         # The walls of each frame (vtk/walls/, indexed by walls.pvd) when some move; still ones once
@@ -337,7 +339,8 @@ class _Run:
         _write_walls(path, self._walls_now(surface))
 
     def output(self) -> None:
-        """Writes frame ``self.frame``: its files, then its row of ``metrics.csv``, then a checkpoint if due."""
+        """Writes frame ``self.frame``: its files, then its row of ``metrics.csv``, then a checkpoint if due (the
+        last two once the files are written)."""
         sim, out = self.sim, self.out
         x, v, body = sim.positions, sim.velocities, sim.body
         name = f"frame_{self.frame:05d}"
@@ -378,12 +381,13 @@ class _Run:
             for f in self.pending[0][1]:
                 f.result()
             self.commit()
-        checkpoint = self.every and self.frame % self.every == 0
-        # A checkpoint must not be ahead of the rows (and PNGs) it implies.
-        self.commit(wait=bool(checkpoint))
-        if checkpoint:
+        if self.every and self.frame % self.every == 0:
+            # The state is taken now and written once this frame's row is committed (see `_write_metrics`):
+            # a checkpoint is never ahead of the rows (and PNGs) it implies, and the simulation does not
+            # wait for the frames still being written.
             meta = {**self.meta, "frame": self.frame, "done": self.done}
-            save_checkpoint(out / CHECKPOINT, sim, meta)
+            self.checkpoints.append((self.frame, sim.checkpoint(), meta))
+        self.commit()
 
     def _body_columns(self, force: np.ndarray) -> dict[str, float]:
         """Each rigid body's row entries: its state now, and the mean force the material put on it (its
@@ -424,6 +428,15 @@ class _Run:
             first = self.rows_sent
             self.metrics_writes.append(self._submit(self._write_csv, first, self.rows[first:]))
             self.rows_sent = len(self.rows)
+        # The latest checkpoint whose frame has its row handed over, written after that row on the files'
+        # thread (in order); older ones are superseded.
+        ready = None
+        while self.checkpoints and self.checkpoints[0][0] < self.rows_sent:
+            ready = self.checkpoints.popleft()
+        if ready is not None:
+            _, state, meta = ready
+            before = list(self.metrics_writes)
+            self.metrics_writes.append(self._submit(self._write_checkpoint, before, state, meta))
         if wait:
             # Everything queued before this point is written once the no-op behind it has run (one worker, in
             # order): rows committed earlier without waiting included.
@@ -432,6 +445,12 @@ class _Run:
         for f in [f for f in self.metrics_writes if f.done()]:
             self.metrics_writes.remove(f)
             f.result()
+
+    def _write_checkpoint(self, before: list[Future], state: dict, meta: dict) -> None:
+        """Writes a checkpoint unless one of the writes queued ``before`` it (done by now: one worker, in order)
+        failed: the rows it implies would not be on disk. Runs on the files' thread."""
+        if all(f.exception() is None for f in before):
+            save_checkpoint(self.out / CHECKPOINT, state, meta)
 
     def _write_csv(self, first: int, rows: list[dict]) -> None:
         """Writes ``metrics.csv`` and ``bodies.csv`` (the rigid bodies' columns of the rows, one row per frame
@@ -537,9 +556,9 @@ def _write_frame(
         write_pvd(out / "walls.pvd", wall_frames)
 
 
-def save_checkpoint(path: Path, sim: Simulation, meta: dict) -> None:
-    """Writes the simulation's state and ``meta`` (JSON) to ``path``, atomically and durably."""
-    state = sim.checkpoint()
+def save_checkpoint(path: Path, state: dict, meta: dict) -> None:
+    """Writes a simulation's ``state`` (:meth:`Simulation.checkpoint`) and ``meta`` (JSON) to ``path``,
+    atomically and durably."""
     arrays = {k: np.asarray(v) for k, v in state.items()}
     arrays["meta"] = np.array(json.dumps(meta))
     write_bytes(path, npz_bytes(arrays), durable=True)
