@@ -51,6 +51,20 @@ def test_fig1_bench_and_report(monkeypatch):
     assert "| naive | 1 | 40 |" in text and "| augmented | 1 | 40 |" in text
 
 
+def test_output_bench_alternates_runs_and_reports_the_median_share():
+    """The output cost alternates a run with every output and one without, round by round; its share is the
+    median of the rounds' shares, within their range, and the report gives it against the 10% target."""
+    rows = bench.bench_output(ROOT / "scenes" / "paper" / "fluid_incline_noslip.toml", steps=200, threads=1, rounds=2)
+    assert [r["method"] for r in rows] == ["naive", "augmented"]
+    for r in rows:
+        assert r["rounds"] == 2 and r["frames"] == 3
+        low, high = r["output_fraction_range"]
+        assert 0.0 <= low <= r["output_fraction"] <= high < 1.0
+        assert r["run_with_output_s"] > 0 and r["simulation_s"] > 0
+    text = bench.format_report({"machine": bench._machine(1), "quick": True, "rows": rows})
+    assert "| naive | 200 | 3 |" in text and "| ≤ 10% |" in text
+
+
 def test_moving_walls_bench_and_report():
     """The moving-walls case times each shipped moving scene against itself with still walls, both methods,
     the same steps each, and reports the ratio of their step times."""
