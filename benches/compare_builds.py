@@ -1,7 +1,7 @@
 """Two builds of the engine in one process, alternated: the honest way to tell a small change from noise.
 
     python benches/compare_builds.py NEW.so OLD.so [--resolution 256] [--method naive] [--steps 10]
-        [--rounds 60] [--threads 1]
+        [--rounds 60] [--threads 1] [--warm-up 3]
 
 Each argument is a built extension (`python/augmpm/_core.abi3.so` of a checkout, or one unpacked from a
 wheel: `maturin build --release`). Both step the same dam break (`augmpm.bench.dam_break_scene`), built
@@ -47,12 +47,17 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=10, help="steps a round")
     parser.add_argument("--rounds", type=int, default=60, help="rounds of each build (even: each goes first as often)")
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument(
+        "--warm-up", type=int, default=3, help="steps before the rounds (thousands: the particles mixed, out of block order)"
+    )
     args = parser.parse_args()
     for path in (args.new, args.old):
         if not path.is_file():
             parser.error(f"{path}: no such extension file")
     if args.rounds < 2 or args.rounds % 2:
         parser.error(f"--rounds {args.rounds}: must be a positive even number (each build goes first as often)")
+    if args.warm_up < 0:
+        parser.error(f"--warm-up {args.warm_up}: must be at least 0")
     if args.steps < 1:
         parser.error(f"--steps {args.steps}: must be at least 1")
     scene = bench.dam_break_scene(args.resolution).to_json()
@@ -61,7 +66,7 @@ def main() -> None:
         for label, path in (("A", args.new), ("B", args.old))
     }
     for sim in sims.values():
-        sim.step(3)
+        sim.step(args.warm_up)
     rounds: dict[str, list[dict[str, float]]] = {"A": [], "B": []}
     for r in range(args.rounds):
         for label in ("A", "B") if r % 2 == 0 else ("B", "A"):
@@ -73,8 +78,8 @@ def main() -> None:
             per = sim.num_particles * args.steps / 1e9
             rounds[label].append({"step": total / per, **{k: (after[k] - before[k]) / per for k in after}})
     print(
-        f"dam break {args.resolution}², {args.method}, {args.threads} thread(s), {args.rounds} rounds of "
-        f"{args.steps} steps; ns a particle-step"
+        f"dam break {args.resolution}², {args.method}, {args.threads} thread(s), {args.warm_up} steps, then "
+        f"{args.rounds} rounds of {args.steps} steps; ns a particle-step"
     )
     print(f"{'stage':9s} {'A':>7s} {'B':>7s}  {'A/B rounds: median [range]':28s} fastest A/B")
     for stage in rounds["A"][0]:
