@@ -57,3 +57,21 @@ impl<'a, T> Disjoint<'a, T> {
         f(unsafe { &mut *self.ptr.add(i) });
     }
 }
+
+/// Asks the CPU to bring element `i` of `slice` into its caches ahead of use (a no-op past the end, and
+/// on targets other than x86-64). Loops that visit particles by index in block order (P2G) read each of
+/// their arrays at scattered addresses once the particles have mixed; the index `AHEAD` particles on is
+/// known, so its loads can be in flight while this one is computed.
+#[inline(always)]
+pub(crate) fn prefetch<T>(slice: &[T], i: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(value) = slice.get(i) {
+        // SAFETY: a prefetch reads nothing the program sees and cannot fault; the address is of a live
+        // element (SSE, which the instruction needs, is in every x86-64 CPU).
+        unsafe {
+            std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>((value as *const T).cast::<i8>())
+        };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (slice, i);
+}
