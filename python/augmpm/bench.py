@@ -420,7 +420,8 @@ OUTPUT_TARGET = 0.10
 def bench_output(path: Path, steps: int, threads: int, rounds: int = OUTPUT_ROUNDS) -> list[dict]:
     """A paper-scene run with every output against the same run without rendering or files, alternated
     ``rounds`` times per method (first one, then the other, the order swapped each round): the share is the
-    median of the rounds' shares, so that the machine's drift between two runs does not count as output."""
+    median of the rounds' shares, so that the machine's drift between two runs does not count as output. Both
+    runs are timed from the simulation's construction (``run_scene`` builds its own)."""
     from augmpm.run import run_scene
 
     scene = load_scene(path)

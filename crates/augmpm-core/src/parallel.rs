@@ -60,8 +60,8 @@ impl<'a, T> Disjoint<'a, T> {
 
 /// Asks the CPU to bring element `i` of `slice` into its caches ahead of use (a no-op past the end, and
 /// on targets other than x86-64). Loops that visit particles by index in block order (P2G) read each of
-/// their arrays at scattered addresses once the particles have mixed; the index `AHEAD` particles on is
-/// known, so its loads can be in flight while this one is computed.
+/// their arrays at scattered addresses once the particles have mixed; the index a few places on in that
+/// order is known, so its loads can be in flight while this particle is computed.
 #[inline(always)]
 pub(crate) fn prefetch<T>(slice: &[T], i: usize) {
     #[cfg(target_arch = "x86_64")]
