@@ -48,7 +48,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=60, help="rounds of each build (even: each goes first as often)")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument(
-        "--warm-up", type=int, default=3, help="steps before the rounds (thousands: the particles mixed, out of block order)"
+        "--warm-up", type=int, default=3, help="steps before the rounds (thousands: the particles have mixed)"
     )
     args = parser.parse_args()
     for path in (args.new, args.old):

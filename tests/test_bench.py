@@ -51,10 +51,31 @@ def test_fig1_bench_and_report(monkeypatch):
     assert "| naive | 1 | 40 |" in text and "| augmented | 1 | 40 |" in text
 
 
-def test_output_bench_alternates_runs_and_reports_the_median_share():
-    """The output cost alternates a run with every output and one without, round by round; its share is the
-    median of the rounds' shares, within their range, and the report gives it against the 10% target."""
+def test_output_bench_alternates_runs_and_reports_the_median_share(monkeypatch):
+    """The output cost alternates a run with every output and one without, each first in every other round,
+    after an untimed warm-up; its share is the median of the rounds' shares, within their range, and the
+    report gives it against the 10% target."""
+    import augmpm.run
+
+    calls = []
+    run_scene = augmpm.run.run_scene
+
+    def recorded_run(scene, out, **kwargs):
+        calls.append(("full", kwargs["method"]) if "method" in kwargs else ("warm-up", None))
+        return run_scene(scene, out, **kwargs)
+
+    class Recorded(bench.Simulation):
+        def step(self, n=1):
+            calls.append(("bare", self.method))
+            return super().step(n)
+
+    monkeypatch.setattr(augmpm.run, "run_scene", recorded_run)
+    monkeypatch.setattr(bench, "Simulation", Recorded)
     rows = bench.bench_output(ROOT / "scenes" / "paper" / "fluid_incline_noslip.toml", steps=200, threads=1, rounds=2)
+    order = ["bare", "full", "full", "bare"]
+    assert calls == [("warm-up", None), *((k, m) for m in bench.METHODS for k in order)]
+    with pytest.raises(ValueError, match="even"):
+        bench.bench_output(ROOT / "scenes" / "paper" / "fluid_incline_noslip.toml", steps=200, threads=1, rounds=3)
     assert [r["method"] for r in rows] == ["naive", "augmented"]
     for r in rows:
         assert r["rounds"] == 2 and r["frames"] == 3

@@ -211,6 +211,45 @@ def test_a_metrics_file_that_cannot_be_written_stops_the_run(small_scene, tmp_pa
         augmpm.run_scene(augmpm.Scene.from_dict(small_scene), tmp_path / "run", progress=False, render=False)
 
 
+def test_a_checkpoint_is_not_written_past_a_metrics_write_that_failed(small_scene, tmp_path, monkeypatch):
+    """The checkpoint queued behind a ``metrics.csv`` write that fails (the one with its frame's row) is not
+    written: the run stops with the write's error, and the checkpoint on disk, if any, is of an earlier
+    frame whose row is in ``metrics.csv``, so the run can still be resumed from it."""
+    import augmpm.run
+
+    small_scene["time"].update(steps=200, output_interval=10)
+    run = augmpm.run
+    write_text, saved = run.write_text, []
+    save_checkpoint = run.save_checkpoint
+
+    def failing(path, text, *args, **kwargs):
+        # Fails the first write holding the row of frame 4 (the second checkpoint's frame, every 4).
+        if path.name == "metrics.csv" and text.count("\n") > 5:
+            raise OSError(28, "No space left on device")
+        return write_text(path, text, *args, **kwargs)
+
+    def recorded(path, state, meta):
+        saved.append(meta["frame"])
+        return save_checkpoint(path, state, meta)
+
+    monkeypatch.setattr(run, "write_text", failing)
+    monkeypatch.setattr(run, "save_checkpoint", recorded)
+    out = tmp_path / "run"
+    with pytest.raises(OSError, match="No space left"):
+        augmpm.run_scene(augmpm.Scene.from_dict(small_scene), out, progress=False, render=False,
+                         checkpoint_every=4)  # fmt: skip
+    assert 4 not in saved and 8 not in saved
+    with open(out / "metrics.csv", newline="") as fh:
+        rows = len(list(csv.DictReader(fh)))
+    assert rows <= 4
+    if saved:
+        meta, _ = run.load_checkpoint(out / run.CHECKPOINT)
+        assert meta["frame"] < rows
+        monkeypatch.setattr(run, "write_text", write_text)
+        result = run.resume_run(out, progress=False)
+        assert result.error is None and result.frames == 21
+
+
 def test_an_output_path_that_is_a_file_is_bad_input(small_scene, tmp_path):
     """Outputs into a path that is a file (or cannot be created) raise SceneError naming `out`, not an OSError."""
     blocker = tmp_path / "file"

@@ -411,8 +411,8 @@ def _max_rss_bytes() -> int:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 
 
-#: Rounds of the output cost, each a run with every output and one without.
-OUTPUT_ROUNDS = 3
+#: Rounds of the output cost, each a run with every output and one without (even: each goes first as often).
+OUTPUT_ROUNDS = 4
 #: Issue 16's target for the output's share of a paper scene's run at its default interval.
 OUTPUT_TARGET = 0.10
 
@@ -421,11 +421,16 @@ def bench_output(path: Path, steps: int, threads: int, rounds: int = OUTPUT_ROUN
     """A paper-scene run with every output against the same run without rendering or files, alternated
     ``rounds`` times per method (first one, then the other, the order swapped each round): the share is the
     median of the rounds' shares, so that the machine's drift between two runs does not count as output. Both
-    runs are timed from the simulation's construction (``run_scene`` builds its own)."""
+    runs are timed from the simulation's construction (``run_scene`` builds its own), after one untimed short
+    run with output (imports, the renderer's first frame, ffmpeg's start)."""
     from augmpm.run import run_scene
 
+    if rounds < 2 or rounds % 2:
+        raise ValueError(f"rounds: must be a positive even number (each run goes first as often), got {rounds}")
     scene = load_scene(path)
     rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        run_scene(scene, Path(tmp) / "warm-up", steps=min(steps, 2 * scene.time.output_interval), progress=False)
     for m in METHODS:
         bare, full = [], []
         for k in range(rounds):

@@ -235,7 +235,8 @@ class _Run:
         self.metrics_writes: list[Future] = []
         # How many committed rows have been handed to the files' thread for metrics.csv and bodies.csv.
         self.rows_sent = 0
-        # Checkpoints taken and not yet written, oldest first: (frame, state, meta).
+        # Checkpoints taken and not yet written, oldest first: (frame, state, meta). Rows lag at most
+        # MAX_PENDING_FRAMES frames, so with a checkpoint every frame up to that many + 1 states wait here.
         self.checkpoints: deque[tuple[int, dict, dict]] = deque()
         self.total = int(meta["total_steps"])
         self.vtk_frames = [(float(r["time"]), f"vtk/frame_{i:05d}.vtp") for i, r in enumerate(rows)]
@@ -402,7 +403,8 @@ class _Run:
     def commit(self, wait: bool = False, rewrite: bool = False) -> None:
         """Writes ``metrics.csv`` with the rows of every frame whose files are all written (with ``wait``,
         waiting for the files and PNGs still being written, and for ``metrics.csv`` itself); ``rewrite``
-        writes it even if no row is new. It is written on the files' thread after the frames' files."""
+        writes it even if no row is new. It is written on the files' thread after the frames' files, and then the
+        latest checkpoint taken whose frame's row it holds (see :meth:`_write_metrics`)."""
         committed, failed = False, False
         try:
             while self.pending and (wait or all(f.done() for f in self.pending[0][1])):
@@ -421,8 +423,9 @@ class _Run:
 
     def _write_metrics(self, new_rows: bool, wait: bool) -> None:
         """Writes ``metrics.csv`` (and ``bodies.csv``) with the committed rows if ``new_rows`` or if it is
-        missing, on the files' thread; with ``wait``, waits until it and every write queued before it are done.
-        A write found failed raises its error."""
+        missing, on the files' thread, then queues the latest checkpoint whose frame has its row handed over
+        (older ones waiting are dropped); with ``wait``, waits until these and every write queued before them
+        are done. A write found failed raises its error."""
         if new_rows or not (self.out / "metrics.csv").exists():
             # The rows are formatted on the files' thread too: here only the new ones are handed over.
             first = self.rows_sent
