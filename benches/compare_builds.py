@@ -1,11 +1,12 @@
 """Two builds of the engine in one process, alternated: the honest way to tell a small change from noise.
 
-    python benches/compare_builds.py NEW.so OLD.so [--resolution 256] [--method naive] [--steps 10]
+    python benches/compare_builds.py NEW.so OLD.so [--resolution 256] [--dim 2] [--method naive] [--steps 10]
         [--rounds 60] [--threads 1] [--warm-up 3]
 
 Each argument is a built extension (`python/augmpm/_core.abi3.so` of a checkout, or one unpacked from a
-wheel: `maturin build --release`). Both step the same dam break (`augmpm.bench.dam_break_scene`), built
-once each, `--steps` steps a round, in alternating order (A B, B A, …), so that the machine's drift and
+wheel: `maturin build --release`). Both step the same dam break (`augmpm.bench.dam_break_scene`, or
+`dam_break_3d_scene` with `--dim 3`), built once each, `--steps` steps a round, in alternating order (A B,
+B A, …), so that the machine's drift and
 the run order fall on both alike. Printed per stage (the engine's stage timers, ns a particle-step): the
 median of each build, the median and range of the round-by-round ratio A/B, and the ratio of the fastest
 rounds (on a shared machine interference mostly slows a round down). Whole-process timings include
@@ -42,7 +43,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("new", type=Path, help="build A: its _core extension")
     parser.add_argument("old", type=Path, help="build B, the yardstick")
-    parser.add_argument("--resolution", type=int, default=256, help="dam break grid: 128, 256 or 512")
+    parser.add_argument("--resolution", type=int, default=256, help="dam break grid: 128, 256 or 512 (3D: 32, 64, 128)")
+    parser.add_argument("--dim", type=int, default=2, choices=[2, 3], help="the 2D or the 3D dam break")
     parser.add_argument("--method", default="naive", choices=["naive", "augmented"])
     parser.add_argument("--steps", type=int, default=10, help="steps a round")
     parser.add_argument("--rounds", type=int, default=60, help="rounds of each build (even: each goes first as often)")
@@ -60,7 +62,7 @@ def main() -> None:
         parser.error(f"--warm-up {args.warm_up}: must be at least 0")
     if args.steps < 1:
         parser.error(f"--steps {args.steps}: must be at least 1")
-    scene = bench.dam_break_scene(args.resolution).to_json()
+    scene = (bench.dam_break_scene if args.dim == 2 else bench.dam_break_3d_scene)(args.resolution).to_json()
     sims = {
         label: load_engine(label, path).Simulation(scene, args.method, args.threads, memory_limit())
         for label, path in (("A", args.new), ("B", args.old))
@@ -78,8 +80,8 @@ def main() -> None:
             per = sim.num_particles * args.steps / 1e9
             rounds[label].append({"step": total / per, **{k: (after[k] - before[k]) / per for k in after}})
     print(
-        f"dam break {args.resolution}², {args.method}, {args.threads} thread(s), {args.warm_up} steps, then "
-        f"{args.rounds} rounds of {args.steps} steps; ns a particle-step"
+        f"{args.dim}D dam break at {args.resolution}, {args.method}, {args.threads} thread(s), {args.warm_up} steps, "
+        f"then {args.rounds} rounds of {args.steps} steps; ns a particle-step"
     )
     print(f"{'stage':9s} {'A':>7s} {'B':>7s}  {'A/B rounds: median [range]':28s} fastest A/B")
     for stage in rounds["A"][0]:
