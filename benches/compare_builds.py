@@ -1,15 +1,15 @@
 """Two builds of the engine in one process, alternated: the honest way to tell a small change from noise.
 
     python benches/compare_builds.py NEW.so OLD.so [--resolution 256] [--dim 2] [--method naive] [--steps 10]
-        [--rounds 60] [--threads 1] [--warm-up 3]
+        [--rounds 60] [--threads 1] [--warm-up 3] [--scene paper/fluid_incline_noslip]
 
 Each argument is a built extension (`python/augmpm/_core.abi3.so` of a checkout, or one unpacked from a
 wheel: `maturin build --release`). Both step the same dam break (`augmpm.bench.dam_break_scene`, or
-`dam_break_3d_scene` with `--dim 3`), built once each, `--steps` steps a round, in alternating order (A B,
-B A, …), so that the machine's drift and
-the run order fall on both alike. Printed per stage (the engine's stage timers, ns a particle-step): the
-median of each build, the median and range of the round-by-round ratio A/B, and the ratio of the fastest
-rounds (on a shared machine interference mostly slows a round down). Whole-process timings include
+`dam_break_3d_scene` with `--dim 3`), or the scene file (or shipped scene's name) of `--scene`, built once
+each, `--steps` steps a round, in alternating order (A B, B A, …), so that the machine's drift and the run
+order fall on both alike. Printed per stage (the engine's stage timers, ns a particle-step): the median of
+each build, the median and range of the round-by-round ratio A/B, and the ratio of the fastest rounds (on a
+shared machine interference mostly slows a round down). Whole-process timings include
 start-up and scene building; this does not.
 
 The scene is built by the installed `augmpm`: both builds must read its scene format. The same file given
@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 from augmpm import bench
+from augmpm.scene import SceneError, load_scene
 from augmpm.simulation import memory_limit
 
 
@@ -50,6 +51,9 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=60, help="rounds of each build (even: each goes first as often)")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument(
+        "--scene", help="a scene file or a shipped scene's name (paper/fluid_incline_noslip) instead of the dam break"
+    )
+    parser.add_argument(
         "--warm-up", type=int, default=3, help="steps before the rounds (thousands: the particles have mixed)"
     )
     args = parser.parse_args()
@@ -62,7 +66,15 @@ def main() -> None:
         parser.error(f"--warm-up {args.warm_up}: must be at least 0")
     if args.steps < 1:
         parser.error(f"--steps {args.steps}: must be at least 1")
-    scene = (bench.dam_break_scene if args.dim == 2 else bench.dam_break_3d_scene)(args.resolution).to_json()
+    if args.scene is not None:
+        try:
+            scene = load_scene(args.scene).to_json()
+        except SceneError as e:
+            parser.error(f"--scene: {e}")
+        what = f"{args.scene}"
+    else:
+        scene = (bench.dam_break_scene if args.dim == 2 else bench.dam_break_3d_scene)(args.resolution).to_json()
+        what = f"{args.dim}D dam break at {args.resolution}"
     sims = {
         label: load_engine(label, path).Simulation(scene, args.method, args.threads, memory_limit())
         for label, path in (("A", args.new), ("B", args.old))
@@ -80,7 +92,7 @@ def main() -> None:
             per = sim.num_particles * args.steps / 1e9
             rounds[label].append({"step": total / per, **{k: (after[k] - before[k]) / per for k in after}})
     print(
-        f"{args.dim}D dam break at {args.resolution}, {args.method}, {args.threads} thread(s), {args.warm_up} steps, "
+        f"{what}, {args.method}, {args.threads} thread(s), {args.warm_up} steps, "
         f"then {args.rounds} rounds of {args.steps} steps; ns a particle-step"
     )
     print(f"{'stage':9s} {'A':>7s} {'B':>7s}  {'A/B rounds: median [range]':28s} fastest A/B")

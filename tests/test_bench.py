@@ -230,7 +230,8 @@ def test_roofline_table_reads_the_machine_roofs():
 
 def test_compare_builds_alternates_two_builds_in_one_process():
     """benches/compare_builds.py steps a dam break with each build and prints, per stage, the two medians and
-    the ratios: the same build against itself gives a step time and ratios near 1; an odd --rounds is refused."""
+    the ratios: the same build against itself gives a step time and ratios near 1; an odd --rounds is refused;
+    --scene steps a shipped scene instead, and a scene it cannot read is refused by name."""
     import subprocess
     import sys
 
@@ -247,3 +248,10 @@ def test_compare_builds_alternates_two_builds_in_one_process():
     assert 0.3 < median < 3 and 0.3 < fastest < 3
     refused = subprocess.run([*args, "--rounds", "3"], capture_output=True, text=True, timeout=60)
     assert refused.returncode == 2 and "--rounds 3" in refused.stderr
+    fig1 = subprocess.run(
+        [*args, "--rounds", "2", "--scene", "paper/fluid_incline_noslip"], capture_output=True, text=True, timeout=120
+    )
+    assert fig1.returncode == 0, fig1.stderr
+    assert fig1.stdout.startswith("paper/fluid_incline_noslip, naive") and "p2g" in fig1.stdout
+    missing = subprocess.run([*args, "--scene", "no/such_scene"], capture_output=True, text=True, timeout=60)
+    assert missing.returncode == 2 and "--scene: no/such_scene" in missing.stderr
