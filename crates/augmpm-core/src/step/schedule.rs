@@ -17,7 +17,7 @@
 
 use crate::grid::{GridLayout, OutOfGrid};
 use crate::math::{floor_i64, Real, Vector};
-use crate::parallel::{Disjoint, MIN_BLOCKS, MIN_TASK, PARALLEL_MIN};
+use crate::parallel::{task_len, worth_splitting, Disjoint, MIN_BLOCKS};
 use rayon::prelude::*;
 
 /// Nodes per block edge (> 2 + 2·SLACK, see the module documentation).
@@ -169,13 +169,13 @@ impl<const D: usize> Schedule<D> {
         assert!(n < u32::MAX as usize, "particle indices are stored as u32");
         let Binning { bins, drift } = binning;
         *drift = Real::INFINITY;
-        self.parallel = n >= PARALLEL_MIN;
+        self.parallel = worth_splitting(n);
         bins.resize(n, 0);
         let inv_h = 1.0 / layout.h;
         let block_dims = self.block_dims;
         let key_of = |(key, xp): (&mut u32, &Vector<D>)| *key = block_of(layout, &block_dims, xp, inv_h);
         if self.parallel {
-            bins.par_iter_mut().zip(x.par_iter()).with_min_len(MIN_TASK).for_each(key_of);
+            bins.par_iter_mut().zip(x.par_iter()).with_min_len(task_len(n)).for_each(key_of);
         } else {
             bins.iter_mut().zip(x).for_each(key_of);
         }
@@ -221,7 +221,7 @@ impl<const D: usize> Schedule<D> {
                 return Err(format!("particle {p} is not within reach of its block {b}"));
             }
         }
-        self.parallel = x.len() >= PARALLEL_MIN;
+        self.parallel = worth_splitting(x.len());
         self.sort_keys(bins).map_err(|OutOfGrid(p)| format!("particle {p} is outside the grid"))?;
         Ok(())
     }

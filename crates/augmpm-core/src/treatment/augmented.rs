@@ -820,8 +820,8 @@ impl<const D: usize> WallParticles<D> {
         x: &[Vector<D>],
     ) -> Result<u64, OutOfGrid> {
         use rayon::prelude::*;
-        let parallel = x.len() >= crate::parallel::PARALLEL_MIN;
-        let min_task = if parallel { crate::parallel::MIN_TASK } else { usize::MAX };
+        let parallel = crate::parallel::worth_splitting(x.len());
+        let min_task = if parallel { crate::parallel::task_len(x.len()) } else { usize::MAX };
         let words = x.len().div_ceil(64);
         self.has_entry.resize(words, 0);
         self.has_entry.par_iter_mut().zip(x.par_chunks(64)).enumerate().with_min_len(min_task / 64).try_for_each(
