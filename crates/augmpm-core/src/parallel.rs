@@ -4,10 +4,10 @@
 use std::marker::PhantomData;
 
 /// Below this many particles a step runs on one thread: the scatter's synchronisation would cost
-/// more than it saves. Fig. 1 (1,526 particles) runs on two: in whole processes stepping it 3,000 steps on
-/// two threads, alternated 12 times with the threshold at 4,096 (serial), 0.87× the time naive and 0.74×
-/// augmented (`augmpm bench` in README, Performance).
-pub const PARALLEL_MIN: usize = 1024;
+/// more than it saves. Tried at 1,024 (2026-12-03), so that Fig. 1's 1,526 particles use two threads: the
+/// bare step took 0.88× the time, but a run with its frames, images and animation took 1.22× (its
+/// output threads then compete with two workers that wait on each other at every stage).
+pub const PARALLEL_MIN: usize = 4096;
 /// Smallest piece of a per-particle loop handed to one thread (see [`task_len`]).
 pub const MIN_TASK: usize = 2048;
 /// Smallest piece of a per-block loop handed to one thread (blocks of BLOCK^D nodes).
