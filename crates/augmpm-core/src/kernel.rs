@@ -33,6 +33,13 @@ impl<const D: usize> Stencil<D> {
         Self { base, w, fx }
     }
 
+    /// The integer grid coordinate of the lowest node of the stencil at `x` ([`Stencil::base`]), without
+    /// the weights.
+    #[inline]
+    pub fn base_of(x: &Vector<D>, inv_h: Real) -> [i64; D] {
+        std::array::from_fn(|k| crate::math::floor_i64(x[k] * inv_h - 0.5))
+    }
+
     /// Calls `f(offset, weight, x_i − x_p)` for every node of the stencil, the first axis fastest; the
     /// distance is in metres (`h` is the grid spacing).
     #[inline]

@@ -612,8 +612,7 @@ impl<const D: usize> AugmentedGrid<D> {
     /// so that its MLS inverse is the closed form of the regular grid.
     #[inline]
     pub fn takes_closed_form(&self, layout: &GridLayout<D>, x: &Vector<D>, p: usize) -> Result<bool, OutOfGrid> {
-        let s = Stencil::new(x, 1.0 / layout.h);
-        let origin = layout.stencil_origin(&s.base).ok_or(OutOfGrid(p))?;
+        let origin = layout.stencil_origin(&Stencil::base_of(x, 1.0 / layout.h)).ok_or(OutOfGrid(p))?;
         Ok(self.closed_form[origin])
     }
 
@@ -655,24 +654,26 @@ impl<const D: usize> AugmentedGrid<D> {
     /// the tilt keeps. A particle that sees more than [`MAX_POINTS`] grid points keeps its B-spline
     /// weights (still positive, so the transfer stays energy-stable, but its first moment is not zero:
     /// its P2G and G2P no longer keep momentum exactly).
+    ///
+    /// `points` is scratch (its contents are replaced), kept by the caller from one particle to the next.
     pub fn stable_inverse<Ops: DimOps<D>>(
         &self,
         layout: &GridLayout<D>,
         x: &Vector<D>,
         p: usize,
+        points: &mut Vec<(Real, Vector<D>)>,
     ) -> Result<(MlsInverse<D>, MlsKind, NearPoints, Real, Tilt<D>), OutOfGrid> {
         // The particle's points (B-spline weight, offset), gathered once for the Newton iterations: its
         // included nodes first, with their stencil offsets, then its boundary points.
-        let mut points = [(0.0, Vector::<D>::zeros()); MAX_POINTS];
+        points.clear();
         let mut offsets = [[0; D]; crate::math::stencil_len(3)];
-        let (mut len, mut seen) = (0, 0);
+        let mut seen = 0;
         let mut total = 0.0;
         let mut keep = |w: Real, d: Vector<D>| {
             total += w;
             seen += 1;
-            if len < MAX_POINTS {
-                points[len] = (w, d);
-                len += 1;
+            if points.len() < MAX_POINTS {
+                points.push((w, d));
             }
         };
         let s = Stencil::new(x, 1.0 / layout.h);
@@ -690,12 +691,12 @@ impl<const D: usize> AugmentedGrid<D> {
             keep(w, d);
             near.push(b);
         });
-        let (tilt, m) = if seen > len {
+        let (tilt, m) = if seen > points.len() {
             let mut m = Moments::new();
             self.for_each_near(layout, x, &near, |_, w, d| m.add(w, &d));
             (Tilt::none(), m)
         } else {
-            centred_tilt::<D, Ops>(&points[..len], &offsets[..nodes], &s.fx, 1.0 / layout.h, total)
+            centred_tilt::<D, Ops>(points, &offsets[..nodes], &s.fx, 1.0 / layout.h, total)
         };
         let (minv, kind) = MlsInverse::from_moments::<Ops>(&m, layout.h);
         Ok((minv, kind, near, total, tilt))
@@ -865,11 +866,13 @@ impl<const D: usize> WallParticles<D> {
             .zip(self.tilt.par_iter_mut())
             .zip(self.particle.par_iter())
             .with_min_len(if parallel { 256 } else { usize::MAX })
-            .map(|((((minv, near), total), tilt), &p)| {
+            // One scratch list of points per piece of the table (zeroing a list of MAX_POINTS per particle
+            // cost ~1% of the 256² augmented step).
+            .map_init(Vec::new, |points, ((((minv, near), total), tilt), &p)| {
                 let (x, p) = (&x[p as usize], p as usize);
                 let kind;
                 if stable {
-                    (*minv, kind, *near, *total, *tilt) = grid.stable_inverse::<Ops>(layout, x, p)?;
+                    (*minv, kind, *near, *total, *tilt) = grid.stable_inverse::<Ops>(layout, x, p, points)?;
                 } else {
                     (*minv, kind, *near, *total) = grid.general_inverse::<Ops>(layout, x, p)?;
                     *tilt = Tilt::none();
@@ -879,8 +882,9 @@ impl<const D: usize> WallParticles<D> {
             .sum()
     }
 
-    /// The table entry of particle `p`, if its MLS system sees a wall.
-    #[inline]
+    /// The table entry of particle `p`, if its MLS system sees a wall (asked of every particle in P2G and
+    /// G2P: inlined, most answers are one bit test).
+    #[inline(always)]
     pub fn entry(&self, p: usize) -> Option<WallEntry<'_, D>> {
         let bits = *self.has_entry.get(p / 64)?;
         let below = 1u64 << (p % 64);
@@ -1076,7 +1080,8 @@ mod tests {
             if inside >= -0.05 * layout.h || grid.takes_closed_form(&layout, &x, 0).unwrap() {
                 continue;
             }
-            let (_, _, near, total, tilt) = grid.stable_inverse::<crate::math::Dim<3>>(&layout, &x, 0).unwrap();
+            let (_, _, near, total, tilt) =
+                grid.stable_inverse::<crate::math::Dim<3>>(&layout, &x, 0, &mut Vec::new()).unwrap();
             if tilt.eta.norm() * layout.h >= TILT_MAX * (1.0 - 1e-9) {
                 continue;
             }
