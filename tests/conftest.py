@@ -48,9 +48,9 @@ def client():
     """A local Dask cluster of 2 worker processes, one thread each, shared by the sweep and dataset tests."""
     import distributed
 
-    cluster = distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40
-    )
+    from augmpm.sweep import local_cluster
+
+    cluster = local_cluster(2)
     with distributed.Client(cluster) as c:
         yield c
     cluster.close()

@@ -216,3 +216,26 @@ def test_workers_with_a_scheduler_is_refused(tmp_path, capsys):
     argv = ["sweep", str(path), "--out", str(tmp_path / "o"), "--scheduler", "tcp://127.0.0.1:1", "--workers", "2"]
     assert main(argv) == 2
     assert "--workers" in capsys.readouterr().err
+
+
+def test_a_local_cluster_does_not_warn_when_the_dashboard_port_is_taken():
+    """Two local clusters at once (two sweeps, parallel tests) start without a warning: the scheduler's HTTP
+    server takes a free port, not 8787, which another may hold."""
+    import socket
+    import warnings
+
+    import distributed
+
+    from augmpm.sweep import local_cluster
+
+    with socket.socket() as held, warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            held.bind(("", 8787))
+            held.listen()
+        except OSError:
+            pass  # already taken by something else: the case under test
+        with local_cluster(1) as cluster, distributed.Client(cluster) as c:
+            assert c.submit(sum, [1, 2]).result() == 3
+            assert cluster.scheduler.services["dashboard"].port != 8787
+    assert not [w for w in caught if "already in use" in str(w.message)]

@@ -305,7 +305,7 @@ def dask_client(scheduler: str | None, workers: int | None, client: Any = None) 
     if client is not None:
         yield client, None
         return
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
     if workers is not None and workers < 1:
         raise _plain_error("--workers", f"must be at least 1, got {workers}")
@@ -319,9 +319,24 @@ def dask_client(scheduler: str | None, workers: int | None, client: Any = None) 
         return
     cores = available_cores()
     n = workers or cores
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40)
-    with cluster, Client(cluster) as own:
+    with local_cluster(n) as cluster, Client(cluster) as own:
         yield own, max(1, cores // n)
+
+
+def local_cluster(workers: int) -> Any:
+    """A Dask cluster of ``workers`` processes on this machine, one thread each, without a dashboard. Its
+    scheduler still serves HTTP (metrics) on a port of its own: by default 8787, where a second cluster (two
+    sweeps at once, parallel tests) would warn that the port is taken before moving elsewhere."""
+    from distributed import LocalCluster
+
+    return LocalCluster(
+        n_workers=workers,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        scheduler_kwargs={"dashboard_address": ":0"},
+        silence_logs=40,
+    )
 
 
 def _run_on_dask(
