@@ -44,8 +44,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("new", type=Path, help="build A: its _core extension")
     parser.add_argument("old", type=Path, help="build B, the yardstick")
-    parser.add_argument("--resolution", type=int, default=256, help="dam break grid: 128, 256 or 512 (3D: 32, 64, 128)")
-    parser.add_argument("--dim", type=int, default=2, choices=[2, 3], help="the 2D or the 3D dam break")
+    parser.add_argument("--resolution", type=int, help="dam break grid: 128, 256 (default) or 512 (3D: 32, 64, 128)")
+    parser.add_argument("--dim", type=int, choices=[2, 3], help="the 2D (default) or the 3D dam break")
     parser.add_argument("--method", default="naive", choices=["naive", "augmented"])
     parser.add_argument("--steps", type=int, default=10, help="steps a round")
     parser.add_argument("--rounds", type=int, default=60, help="rounds of each build (even: each goes first as often)")
@@ -67,14 +67,17 @@ def main() -> None:
     if args.steps < 1:
         parser.error(f"--steps {args.steps}: must be at least 1")
     if args.scene is not None:
+        if args.dim is not None or args.resolution is not None:
+            parser.error("--scene: the scene sets its own grid (--dim and --resolution are the dam break's)")
         try:
             scene = load_scene(args.scene).to_json()
         except SceneError as e:
             parser.error(f"--scene: {e}")
-        what = f"{args.scene}"
+        what = args.scene
     else:
-        scene = (bench.dam_break_scene if args.dim == 2 else bench.dam_break_3d_scene)(args.resolution).to_json()
-        what = f"{args.dim}D dam break at {args.resolution}"
+        dim, resolution = args.dim or 2, args.resolution or 256
+        scene = (bench.dam_break_scene if dim == 2 else bench.dam_break_3d_scene)(resolution).to_json()
+        what = f"{dim}D dam break at {resolution}"
     sims = {
         label: load_engine(label, path).Simulation(scene, args.method, args.threads, memory_limit())
         for label, path in (("A", args.new), ("B", args.old))

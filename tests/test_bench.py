@@ -248,10 +248,15 @@ def test_compare_builds_alternates_two_builds_in_one_process():
     assert 0.3 < median < 3 and 0.3 < fastest < 3
     refused = subprocess.run([*args, "--rounds", "3"], capture_output=True, text=True, timeout=60)
     assert refused.returncode == 2 and "--rounds 3" in refused.stderr
-    fig1 = subprocess.run(
-        [*args, "--rounds", "2", "--scene", "paper/fluid_incline_noslip"], capture_output=True, text=True, timeout=120
-    )
+    on_scene = [sys.executable, str(script), engine, engine, "--steps", "5", "--rounds", "2", "--scene"]
+    fig1 = subprocess.run([*on_scene, "paper/fluid_incline_noslip"], capture_output=True, text=True, timeout=120)
     assert fig1.returncode == 0, fig1.stderr
-    assert fig1.stdout.startswith("paper/fluid_incline_noslip, naive") and "p2g" in fig1.stdout
-    missing = subprocess.run([*args, "--scene", "no/such_scene"], capture_output=True, text=True, timeout=60)
+    assert fig1.stdout.startswith("paper/fluid_incline_noslip, naive")
+    rows = {line.split()[0]: line.split()[1:] for line in fig1.stdout.splitlines()[2:]}
+    assert {"step", "p2g", "g2p"} <= rows.keys()
+    a, b, median = (float(rows["step"][i].strip("[],")) for i in (0, 1, 2))
+    assert a > 0 and b > 0 and 0.3 < median < 3
+    missing = subprocess.run([*on_scene, "no/such_scene"], capture_output=True, text=True, timeout=60)
     assert missing.returncode == 2 and "--scene: no/such_scene" in missing.stderr
+    both = subprocess.run([*on_scene, "paper/fluid_incline_noslip", "--dim", "3"], capture_output=True, text=True)
+    assert both.returncode == 2 and "--dim and --resolution" in both.stderr

@@ -220,7 +220,7 @@ def test_workers_with_a_scheduler_is_refused(tmp_path, capsys):
 
 def test_a_local_cluster_does_not_warn_when_the_dashboard_port_is_taken():
     """Two local clusters at once (two sweeps, parallel tests) start without a warning: the scheduler's HTTP
-    server takes a free port, not 8787, which another may hold."""
+    server takes a free port, not 8787, which another may hold, and only on the loopback interface."""
     import socket
     import warnings
 
@@ -237,5 +237,6 @@ def test_a_local_cluster_does_not_warn_when_the_dashboard_port_is_taken():
             pass  # already taken by something else: the case under test
         with local_cluster(1) as cluster, distributed.Client(cluster) as c:
             assert c.submit(sum, [1, 2]).result() == 3
-            assert cluster.scheduler.services["dashboard"].port != 8787
+            server = cluster.scheduler.services["dashboard"]
+            assert server.port != 8787 and server.address == "127.0.0.1"
     assert not [w for w in caught if "already in use" in str(w.message)]

@@ -325,8 +325,9 @@ def dask_client(scheduler: str | None, workers: int | None, client: Any = None) 
 
 def local_cluster(workers: int) -> Any:
     """A Dask cluster of ``workers`` processes on this machine, one thread each, without a dashboard. Its
-    scheduler still serves HTTP (metrics) on a port of its own: by default 8787, where a second cluster (two
-    sweeps at once, parallel tests) would warn that the port is taken before moving elsewhere."""
+    scheduler still serves HTTP (metrics): on a free port of the loopback interface, not on 8787, where a
+    second cluster (two sweeps at once, parallel tests) would warn that the port is taken, nor on every
+    interface, where ``:0`` would put it."""
     from distributed import LocalCluster
 
     return LocalCluster(
@@ -334,7 +335,7 @@ def local_cluster(workers: int) -> Any:
         threads_per_worker=1,
         processes=True,
         dashboard_address=None,
-        scheduler_kwargs={"dashboard_address": ":0"},
+        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
         silence_logs=40,
     )
 

@@ -3,10 +3,10 @@
 
 use std::marker::PhantomData;
 
-/// Below this many particles a step runs on one thread: the scatter's synchronisation would cost
-/// more than it saves. Tried at 1,024 (2026-12-03), so that Fig. 1's 1,526 particles use two threads: the
-/// bare step took 0.88× the time, but a run with its frames, images and animation took 1.22× (its
-/// output threads then compete with two workers that wait on each other at every stage).
+/// Below this many particles a step runs on one thread. Tried at 1,024 (2026-12-03), so that Fig. 1's 1,526
+/// particles use two threads: the bare step took 0.88× the time, but a run with its frames, images and
+/// animation took 1.22× (its output threads then compete with two workers that wait on each other at every
+/// stage, where on one thread they have the second core to themselves).
 pub const PARALLEL_MIN: usize = 4096;
 /// Smallest piece of a per-particle loop handed to one thread (see [`task_len`]).
 pub const MIN_TASK: usize = 2048;
@@ -89,4 +89,30 @@ pub(crate) fn prefetch<T>(slice: &[T], i: usize) {
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = (slice, i);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A loop's pieces are an eighth of it, at most [`MIN_TASK`] and at least one particle.
+    #[test]
+    fn task_len_is_an_eighth_within_its_bounds() {
+        assert_eq!(task_len(0), 1);
+        assert_eq!(task_len(7), 1);
+        assert_eq!(task_len(4096), 512);
+        assert_eq!(task_len(4097), 513);
+        assert_eq!(task_len(16_384), MIN_TASK);
+        assert_eq!(task_len(1 << 20), MIN_TASK);
+    }
+
+    /// One thread never takes the parallel forms, whatever the size.
+    #[test]
+    fn a_pool_of_one_thread_does_not_split() {
+        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        assert!(!one.install(|| worth_splitting(1 << 20)));
+        assert!(two.install(|| worth_splitting(PARALLEL_MIN)));
+        assert!(!two.install(|| worth_splitting(PARALLEL_MIN - 1)));
+    }
 }

@@ -134,7 +134,9 @@ impl<const D: usize> Schedule<D> {
         })
     }
 
-    /// Whether the transfers of this step run in parallel (enough particles).
+    /// Whether the transfers of this step run in parallel: enough particles, and a pool of more than one
+    /// thread when they were last binned ([`worth_splitting`]; a pool changed since counts from the next
+    /// binning, which changes how fast, not what, the step computes).
     pub fn parallel(&self) -> bool {
         self.parallel
     }

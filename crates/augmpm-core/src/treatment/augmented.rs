@@ -988,6 +988,34 @@ mod tests {
         }
     }
 
+    /// The scratch list `stable_inverse` is handed holds nothing it reads: a list left full by another
+    /// particle (longer than any particle's, stale values) gives bitwise the same inverse, tilt and sums as
+    /// an empty one, for particles along a tilted floor.
+    #[test]
+    fn stable_inverse_reads_nothing_left_in_its_scratch() {
+        let layout = GridLayout::<2>::new(1.0 / 32.0, [32, 32]);
+        let tank =
+            Polygon::new(vec![Point::new(0.1, 0.1), Point::new(0.9, 0.2), Point::new(0.9, 0.9), Point::new(0.1, 0.9)]);
+        let region = Walls2::new(vec![WallShape::Polygon(tank)], Point::new(1.0, 1.0));
+        let contacts = vec![WallContact::from(crate::wall::WallCondition::Slip); 2];
+        let grid = AugmentedGrid::new(&layout, &region, layout.h, contacts, 0.1 * layout.h);
+        let mut stale = vec![(7.0, Vector::<2>::new(3.0, -2.0)); 2 * MAX_POINTS];
+        let mut seen = 0;
+        for k in 0..40 {
+            let u = 0.12 + 0.76 * k as Real / 39.0;
+            let x = Vector::<2>::new(u, 0.1 + 0.125 * (u - 0.1) + 0.4 * layout.h);
+            if grid.takes_closed_form(&layout, &x, k).unwrap() {
+                continue;
+            }
+            seen += 1;
+            let fresh = grid.stable_inverse::<crate::math::Dim<2>>(&layout, &x, k, &mut Vec::new()).unwrap();
+            let reused = grid.stable_inverse::<crate::math::Dim<2>>(&layout, &x, k, &mut stale).unwrap();
+            assert_eq!(format!("{fresh:?}"), format!("{reused:?}"), "particle at {x:?}");
+            stale.resize(2 * MAX_POINTS, (-1.0, Vector::<2>::new(5.0, 5.0)));
+        }
+        assert!(seen > 20, "{seen} particles near the floor");
+    }
+
     /// Steps the walls of `region` `steps` times (2 ms each) and checks, after each, that following them
     /// built what a full build of the grid would.
     fn follow_and_compare<const D: usize>(
