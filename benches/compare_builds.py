@@ -44,7 +44,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("new", type=Path, help="build A: its _core extension")
     parser.add_argument("old", type=Path, help="build B, the yardstick")
-    parser.add_argument("--resolution", type=int, help="dam break grid: 128, 256 (default) or 512 (3D: 32, 64, 128)")
+    parser.add_argument(
+        "--resolution", type=int, help="dam break grid: 128, 256 or 512 (3D: 32, 64, 128); default 256 (3D: 64)"
+    )
     parser.add_argument("--dim", type=int, choices=[2, 3], help="the 2D (default) or the 3D dam break")
     parser.add_argument("--method", default="naive", choices=["naive", "augmented"])
     parser.add_argument("--steps", type=int, default=10, help="steps a round")
@@ -75,7 +77,8 @@ def main() -> None:
             parser.error(f"--scene: {e}")
         what = args.scene
     else:
-        dim, resolution = args.dim or 2, args.resolution or 256
+        dim = args.dim or 2
+        resolution = args.resolution or (256 if dim == 2 else 64)
         scene = (bench.dam_break_scene if dim == 2 else bench.dam_break_3d_scene)(resolution).to_json()
         what = f"{dim}D dam break at {resolution}"
     sims = {
