@@ -182,3 +182,23 @@ def test_render_run_draws_a_3d_run(tmp_path):
     coloured = np.ptp(img.astype(int), axis=2) > 20
     coloured[:160, 256 - 110 :] = False
     assert coloured.sum() > 50
+
+
+def test_body_colours_are_matplotlibs_tab10():
+    """The particles' body colours, written out in render.py, are matplotlib's tab10 in 8-bit RGB."""
+    import matplotlib
+
+    tab10 = np.round(np.array(matplotlib.colormaps["tab10"].colors) * 255).astype(np.uint8)
+    assert COLOURS.dtype == np.uint8 and np.array_equal(COLOURS, tab10)
+
+
+def test_importing_augmpm_does_not_import_matplotlib():
+    """`import augmpm` (the run driver and the renderer included) leaves matplotlib unimported: it costs
+    ~0.7 s and only draws frame backgrounds, field colours and plots, which import it when they run."""
+    import subprocess
+    import sys
+
+    code = "import sys, augmpm, augmpm.run, augmpm.render; print(sorted(m for m in sys.modules if 'matplotlib' in m))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"

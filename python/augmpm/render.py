@@ -29,18 +29,30 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
-import matplotlib
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-from matplotlib.patches import Circle, PathPatch, Polygon, Rectangle
 from PIL import Image, ImageDraw, ImageFont
 
 from augmpm.files import write_bytes
 from augmpm.scene import CircleWall, PolygonWall, PolylineWall, Scene
 
-# tab10, as 8-bit RGB; particles of body b take colour b mod 10.
-COLOURS = np.round(np.array(matplotlib.colormaps["tab10"].colors) * 255).astype(np.uint8)
+# matplotlib's tab10, as 8-bit RGB (a test checks them against it); particles of body b take colour b mod 10.
+# Written out so that importing augmpm does not import matplotlib (~0.7 s), which only draws the walls of a
+# frame's background and the field colour maps.
+COLOURS = np.array(
+    [
+        [31, 119, 180],
+        [255, 127, 14],
+        [44, 160, 44],
+        [214, 39, 40],
+        [148, 103, 189],
+        [140, 86, 75],
+        [227, 119, 194],
+        [127, 127, 127],
+        [188, 189, 34],
+        [23, 190, 207],
+    ],
+    dtype=np.uint8,
+)
 # A pixel belongs to a particle's dot when the pixel's centre lies within this radius (px) of the particle.
 DOT_RADIUS_PX = 1.6
 _DPI = 100
@@ -53,9 +65,12 @@ _MAX_PENDING = 8
 _WRITER_NICE = 5
 
 
-def _closed_path(vertices: np.ndarray) -> matplotlib.path.Path:
+def _closed_path(vertices: np.ndarray) -> Any:
+    """A closed matplotlib Path through ``vertices``."""
+    from matplotlib.path import Path as MplPath
+
     # A closed Path ignores its last vertex (the CLOSEPOLY slot), so repeat the first.
-    return matplotlib.path.Path(np.vstack([vertices, vertices[:1]]), closed=True)
+    return MplPath(np.vstack([vertices, vertices[:1]]), closed=True)
 
 
 class _Camera:
@@ -125,6 +140,11 @@ def _draw_background(
     """The walls drawn by matplotlib: RGB image (H, W, 3) and the world → display map (px per m, offset px).
     A polyline wall is drawn from its outline in ``outlines`` (one per wall, from
     ``Simulation.wall_outlines``), else as its segments and round joints."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Circle, PathPatch, Polygon, Rectangle
+    from matplotlib.path import Path as MplPath
+
     lx, ly = scene.grid.domain
     width, height = image_size(scene, size_px)
     fig = Figure(figsize=(width / _DPI, height / _DPI), dpi=_DPI)
@@ -146,7 +166,7 @@ def _draw_background(
             outline = np.array(w.vertices)
             ax.add_patch(Polygon(outline, closed=True, fill=False, edgecolor="0.2", linewidth=1.5))
             box = np.array([[0, 0], [0, ly], [lx, ly], [lx, 0]])  # clockwise: the polygon is a hole
-            path = matplotlib.path.Path.make_compound_path(_closed_path(box), _closed_path(outline))
+            path = MplPath.make_compound_path(_closed_path(box), _closed_path(outline))
             ax.add_patch(PathPatch(path, facecolor="0.85", edgecolor="none", zorder=0))
         elif isinstance(w, CircleWall):
             ax.add_patch(Circle(w.center, w.radius, fill=(w.side == "outside"), **wall_style))
@@ -243,6 +263,8 @@ FIELD_CMAP = "viridis"
 
 def field_colours(values: np.ndarray, low: float, high: float) -> np.ndarray:
     """RGB (N, 3) uint8 of ``values`` on :data:`FIELD_CMAP` between ``low`` and ``high`` (clipped)."""
+    import matplotlib
+
     span = high - low if high > low else 1.0
     t = np.clip((np.asarray(values, dtype=float) - low) / span, 0.0, 1.0)
     return np.round(matplotlib.colormaps[FIELD_CMAP](np.nan_to_num(t))[:, :3] * 255).astype(np.uint8)
