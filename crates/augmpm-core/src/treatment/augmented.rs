@@ -956,18 +956,25 @@ mod tests {
         follow_and_compare(&layout, &mut region, &contacts, 200);
     }
 
-    /// The wall table gives entries to exactly the particles that do not take the closed form, numbered in
-    /// particle order across the 64-particle words of its bit index (200 then 130 particles on a line that
-    /// comes near a tilted wall, so words hold none or some of their particles near it, and the last word is
-    /// partly filled).
-    #[test]
-    fn the_table_numbers_the_particles_near_walls_in_order() {
+    /// The augmented grid (slip walls) of a 32² grid over a tank whose floor rises from (0.1, 0.1) to
+    /// (0.9, 0.2) m.
+    fn tilted_floor_grid() -> (GridLayout<2>, AugmentedGrid<2>) {
         let layout = GridLayout::<2>::new(1.0 / 32.0, [32, 32]);
         let tank =
             Polygon::new(vec![Point::new(0.1, 0.1), Point::new(0.9, 0.2), Point::new(0.9, 0.9), Point::new(0.1, 0.9)]);
         let region = Walls2::new(vec![WallShape::Polygon(tank)], Point::new(1.0, 1.0));
         let contacts = vec![WallContact::from(crate::wall::WallCondition::Slip); 2];
         let grid = AugmentedGrid::new(&layout, &region, layout.h, contacts, 0.1 * layout.h);
+        (layout, grid)
+    }
+
+    /// The wall table gives entries to exactly the particles that do not take the closed form, numbered in
+    /// particle order across the 64-particle words of its bit index (200 then 130 particles on a line that
+    /// comes near a tilted wall, so words hold none or some of their particles near it, and the last word is
+    /// partly filled).
+    #[test]
+    fn the_table_numbers_the_particles_near_walls_in_order() {
+        let (layout, grid) = tilted_floor_grid();
         let mut table = WallParticles::<2>::default();
         for n in [200, 130] {
             // Down the middle, from the top (away from walls) to the floor, then back up.
@@ -993,12 +1000,7 @@ mod tests {
     /// an empty one, for particles along a tilted floor.
     #[test]
     fn stable_inverse_reads_nothing_left_in_its_scratch() {
-        let layout = GridLayout::<2>::new(1.0 / 32.0, [32, 32]);
-        let tank =
-            Polygon::new(vec![Point::new(0.1, 0.1), Point::new(0.9, 0.2), Point::new(0.9, 0.9), Point::new(0.1, 0.9)]);
-        let region = Walls2::new(vec![WallShape::Polygon(tank)], Point::new(1.0, 1.0));
-        let contacts = vec![WallContact::from(crate::wall::WallCondition::Slip); 2];
-        let grid = AugmentedGrid::new(&layout, &region, layout.h, contacts, 0.1 * layout.h);
+        let (layout, grid) = tilted_floor_grid();
         let mut stale = vec![(7.0, Vector::<2>::new(3.0, -2.0)); 2 * MAX_POINTS];
         let mut seen = 0;
         for k in 0..40 {
