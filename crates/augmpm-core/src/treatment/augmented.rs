@@ -654,27 +654,24 @@ impl<const D: usize> AugmentedGrid<D> {
     /// the tilt keeps. A particle that sees more than [`MAX_POINTS`] grid points keeps its B-spline
     /// weights (still positive, so the transfer stays energy-stable, but its first moment is not zero:
     /// its P2G and G2P no longer keep momentum exactly).
-    ///
-    /// `points` is scratch (its contents are replaced), kept by the caller from one particle to the next.
     pub fn stable_inverse<Ops: DimOps<D>>(
         &self,
         layout: &GridLayout<D>,
         x: &Vector<D>,
         p: usize,
-        points: &mut Vec<(Real, Vector<D>)>,
     ) -> Result<(MlsInverse<D>, MlsKind, NearPoints, Real, Tilt<D>), OutOfGrid> {
         // The particle's points (B-spline weight, offset), gathered once for the Newton iterations: its
-        // included nodes first, with their stencil offsets, then its boundary points.
-        points.clear();
+        // included nodes first, with their stencil offsets, then its boundary points. On the stack and not
+        // zeroed (a zeroed array of MAX_POINTS cost ~1% of the 256² augmented step).
+        let mut points = arrayvec::ArrayVec::<(Real, Vector<D>), MAX_POINTS>::new();
         let mut offsets = [[0; D]; crate::math::stencil_len(3)];
         let mut seen = 0;
         let mut total = 0.0;
         let mut keep = |w: Real, d: Vector<D>| {
             total += w;
             seen += 1;
-            if points.len() < MAX_POINTS {
-                points.push((w, d));
-            }
+            // Past MAX_POINTS, `seen` tells (below): the particle keeps its B-spline weights.
+            let _ = points.try_push((w, d));
         };
         let s = Stencil::new(x, 1.0 / layout.h);
         let origin = layout.stencil_origin(&s.base).ok_or(OutOfGrid(p))?;
@@ -696,7 +693,7 @@ impl<const D: usize> AugmentedGrid<D> {
             self.for_each_near(layout, x, &near, |_, w, d| m.add(w, &d));
             (Tilt::none(), m)
         } else {
-            centred_tilt::<D, Ops>(points, &offsets[..nodes], &s.fx, 1.0 / layout.h, total)
+            centred_tilt::<D, Ops>(&points, &offsets[..nodes], &s.fx, 1.0 / layout.h, total)
         };
         let (minv, kind) = MlsInverse::from_moments::<Ops>(&m, layout.h);
         Ok((minv, kind, near, total, tilt))
@@ -866,13 +863,11 @@ impl<const D: usize> WallParticles<D> {
             .zip(self.tilt.par_iter_mut())
             .zip(self.particle.par_iter())
             .with_min_len(if parallel { 256 } else { usize::MAX })
-            // One scratch list of points per piece of the table (zeroing a list of MAX_POINTS per particle
-            // cost ~1% of the 256² augmented step).
-            .map_init(Vec::new, |points, ((((minv, near), total), tilt), &p)| {
+            .map(|((((minv, near), total), tilt), &p)| {
                 let (x, p) = (&x[p as usize], p as usize);
                 let kind;
                 if stable {
-                    (*minv, kind, *near, *total, *tilt) = grid.stable_inverse::<Ops>(layout, x, p, points)?;
+                    (*minv, kind, *near, *total, *tilt) = grid.stable_inverse::<Ops>(layout, x, p)?;
                 } else {
                     (*minv, kind, *near, *total) = grid.general_inverse::<Ops>(layout, x, p)?;
                     *tilt = Tilt::none();
@@ -956,25 +951,18 @@ mod tests {
         follow_and_compare(&layout, &mut region, &contacts, 200);
     }
 
-    /// The augmented grid (slip walls) of a 32² grid over a tank whose floor rises from (0.1, 0.1) to
-    /// (0.9, 0.2) m.
-    fn tilted_floor_grid() -> (GridLayout<2>, AugmentedGrid<2>) {
-        let layout = GridLayout::<2>::new(1.0 / 32.0, [32, 32]);
-        let tank =
-            Polygon::new(vec![Point::new(0.1, 0.1), Point::new(0.9, 0.2), Point::new(0.9, 0.9), Point::new(0.1, 0.9)]);
-        let region = Walls2::new(vec![WallShape::Polygon(tank)], Point::new(1.0, 1.0));
-        let contacts = vec![WallContact::from(crate::wall::WallCondition::Slip); 2];
-        let grid = AugmentedGrid::new(&layout, &region, layout.h, contacts, 0.1 * layout.h);
-        (layout, grid)
-    }
-
     /// The wall table gives entries to exactly the particles that do not take the closed form, numbered in
     /// particle order across the 64-particle words of its bit index (200 then 130 particles on a line that
     /// comes near a tilted wall, so words hold none or some of their particles near it, and the last word is
     /// partly filled).
     #[test]
     fn the_table_numbers_the_particles_near_walls_in_order() {
-        let (layout, grid) = tilted_floor_grid();
+        let layout = GridLayout::<2>::new(1.0 / 32.0, [32, 32]);
+        let tank =
+            Polygon::new(vec![Point::new(0.1, 0.1), Point::new(0.9, 0.2), Point::new(0.9, 0.9), Point::new(0.1, 0.9)]);
+        let region = Walls2::new(vec![WallShape::Polygon(tank)], Point::new(1.0, 1.0));
+        let contacts = vec![WallContact::from(crate::wall::WallCondition::Slip); 2];
+        let grid = AugmentedGrid::new(&layout, &region, layout.h, contacts, 0.1 * layout.h);
         let mut table = WallParticles::<2>::default();
         for n in [200, 130] {
             // Down the middle, from the top (away from walls) to the floor, then back up.
@@ -993,29 +981,6 @@ mod tests {
                 assert_eq!(slot, near.iter().position(|&q| q == p), "particle {p} of {n}");
             }
         }
-    }
-
-    /// The scratch list `stable_inverse` is handed holds nothing it reads: a list left full by another
-    /// particle (longer than any particle's, stale values) gives bitwise the same inverse, tilt and sums as
-    /// an empty one, for particles along a tilted floor.
-    #[test]
-    fn stable_inverse_reads_nothing_left_in_its_scratch() {
-        let (layout, grid) = tilted_floor_grid();
-        let mut stale = vec![(7.0, Vector::<2>::new(3.0, -2.0)); 2 * MAX_POINTS];
-        let mut seen = 0;
-        for k in 0..40 {
-            let u = 0.12 + 0.76 * k as Real / 39.0;
-            let x = Vector::<2>::new(u, 0.1 + 0.125 * (u - 0.1) + 0.4 * layout.h);
-            if grid.takes_closed_form(&layout, &x, k).unwrap() {
-                continue;
-            }
-            seen += 1;
-            let fresh = grid.stable_inverse::<crate::math::Dim<2>>(&layout, &x, k, &mut Vec::new()).unwrap();
-            let reused = grid.stable_inverse::<crate::math::Dim<2>>(&layout, &x, k, &mut stale).unwrap();
-            assert_eq!(format!("{fresh:?}"), format!("{reused:?}"), "particle at {x:?}");
-            stale.resize(2 * MAX_POINTS, (-1.0, Vector::<2>::new(5.0, 5.0)));
-        }
-        assert!(seen > 20, "{seen} particles near the floor");
     }
 
     /// Steps the walls of `region` `steps` times (2 ms each) and checks, after each, that following them
@@ -1110,8 +1075,7 @@ mod tests {
             if inside >= -0.05 * layout.h || grid.takes_closed_form(&layout, &x, 0).unwrap() {
                 continue;
             }
-            let (_, _, near, total, tilt) =
-                grid.stable_inverse::<crate::math::Dim<3>>(&layout, &x, 0, &mut Vec::new()).unwrap();
+            let (_, _, near, total, tilt) = grid.stable_inverse::<crate::math::Dim<3>>(&layout, &x, 0).unwrap();
             if tilt.eta.norm() * layout.h >= TILT_MAX * (1.0 - 1e-9) {
                 continue;
             }
