@@ -23,6 +23,10 @@ pub struct WallNode<const D: usize> {
 pub struct NaiveBoundary<const D: usize> {
     /// The wall nodes, classified once (still walls; empty when the walls move).
     pub nodes: Vec<WallNode<D>>,
+    /// The node of each entry of `nodes`, apart: each step scans these for the few wall nodes that hold
+    /// mass, and reads a 48-byte record only for those (on the 256² bench dam break 0.11 ms a step was spent
+    /// scanning the records, about 25,000 outside the tilted tank, nearly all without mass).
+    ids: Vec<u32>,
     /// Condition and friction of each wall.
     pub walls: Vec<WallContact>,
     /// Whether the walls move: the nodes are then classified where the material is, at each step.
@@ -33,7 +37,7 @@ impl<const D: usize> NaiveBoundary<D> {
     /// Classifies every node of `layout` against `region`, each wall node with its wall's surface
     /// velocity there.
     pub fn new(layout: &GridLayout<D>, region: &dyn Region<D>, walls: Vec<WallContact>) -> Self {
-        let mut naive = Self { nodes: Vec::new(), walls, moving: false };
+        let mut naive = Self { nodes: Vec::new(), ids: Vec::new(), walls, moving: false };
         naive.classify(layout, region);
         naive
     }
@@ -41,6 +45,7 @@ impl<const D: usize> NaiveBoundary<D> {
     /// Classifies the nodes where the walls are now.
     pub fn classify(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>) {
         self.nodes = (0..layout.num_nodes()).filter_map(|node| wall_node(layout, region, node)).collect();
+        self.ids = self.nodes.iter().map(|w| u32::try_from(w.node).expect("grid nodes are counted in u32")).collect();
     }
 
     /// Follows walls that moved: from now on the nodes are classified at each step, and only those that
@@ -48,11 +53,12 @@ impl<const D: usize> NaiveBoundary<D> {
     pub fn follow(&mut self) {
         self.moving = true;
         self.nodes = Vec::new();
+        self.ids = Vec::new();
     }
 
     /// Heap bytes of the wall-node list.
     pub fn heap_bytes(&self) -> usize {
-        crate::math::heap_bytes(&self.nodes) + crate::math::heap_bytes(&self.walls)
+        crate::math::heap_bytes(&self.nodes) + crate::math::heap_bytes(&self.ids) + crate::math::heap_bytes(&self.walls)
     }
 
     /// Projects the grid velocities of wall nodes (after momentum → velocity), adding each wall's
@@ -81,7 +87,12 @@ impl<const D: usize> NaiveBoundary<D> {
                 .filter_map(|node| wall_node(layout, region, node))
                 .for_each(|w| project(&w));
         } else {
-            self.nodes.iter().for_each(project);
+            // In node order, as before (the impulses are summed in it).
+            for (k, &node) in self.ids.iter().enumerate() {
+                if mass[node as usize] > 0.0 {
+                    project(&self.nodes[k]);
+                }
+            }
         }
     }
 }
