@@ -105,15 +105,23 @@ impl<const D: usize> GridLayout<D> {
 pub struct GridState<const D: usize> {
     /// Node mass (kg in 3D, kg/m in 2D).
     pub mass: Vec<Real>,
-    /// Σ w m_p with the plain B-spline weights: equals `mass` on the regular grid.
+    /// Σ w m_p with the plain B-spline weights, where a step reads it (the paper's augmented transfer, whose
+    /// low-mass floor compares the MLS mass with it); empty otherwise (it would equal `mass`).
     pub spline_mass: Vec<Real>,
     /// Momentum after particle→grid, velocity (m/s) after the grid update.
     pub momentum: Vec<Vector<D>>,
 }
 
 impl<const D: usize> GridState<D> {
-    pub fn new(n: usize) -> Self {
-        Self { mass: vec![0.0; n], spline_mass: vec![0.0; n], momentum: vec![Vector::<D>::zeros(); n] }
+    /// Zero state on `n` grid points, with the B-spline mass if `spline` (see [`GridState::spline_mass`]).
+    pub fn new(n: usize, spline: bool) -> Self {
+        let spline_mass = if spline { vec![0.0; n] } else { Vec::new() };
+        Self { mass: vec![0.0; n], spline_mass, momentum: vec![Vector::<D>::zeros(); n] }
+    }
+
+    /// Whether the B-spline mass is kept.
+    pub fn keeps_spline_mass(&self) -> bool {
+        !self.spline_mass.is_empty()
     }
 
     /// Heap bytes of the arrays.
@@ -124,8 +132,10 @@ impl<const D: usize> GridState<D> {
 
     /// `n` grid points (after moving walls changed the number of boundary points), new ones zero.
     pub fn resize(&mut self, n: usize) {
+        if self.keeps_spline_mass() {
+            self.spline_mass.resize(n, 0.0);
+        }
         self.mass.resize(n, 0.0);
-        self.spline_mass.resize(n, 0.0);
         self.momentum.resize(n, Vector::<D>::zeros());
     }
 }

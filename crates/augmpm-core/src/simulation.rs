@@ -349,18 +349,18 @@ impl<const D: usize> Scratch<D> {
         schedule.prepare(layout, x, binning)?;
         let nodes = layout.num_nodes();
         {
-            let (mass, spline) =
-                (Disjoint::new(&mut grid.mass[..nodes]), Disjoint::new(&mut grid.spline_mass[..nodes]));
-            let momentum = Disjoint::new(&mut grid.momentum[..nodes]);
+            let (mass, momentum) = (Disjoint::new(&mut grid.mass[..nodes]), Disjoint::new(&mut grid.momentum[..nodes]));
             // SAFETY: node blocks do not overlap, and each is listed once.
             schedule.for_each_node_of(layout, schedule.stale(), |i| unsafe {
                 mass.update(i, |m| *m = 0.0);
-                spline.update(i, |m| *m = 0.0);
                 momentum.update(i, |m| *m = Vector::<D>::zeros());
             });
         }
+        if grid.keeps_spline_mass() {
+            schedule.clear(layout, schedule.stale(), &mut grid.spline_mass[..nodes], 0.0);
+            grid.spline_mass[nodes..].fill(0.0);
+        }
         grid.mass[nodes..].fill(0.0);
-        grid.spline_mass[nodes..].fill(0.0);
         grid.momentum[nodes..].fill(Vector::<D>::zeros());
         Ok(())
     }
@@ -514,7 +514,7 @@ where
         let density = model.needs_grid_density();
         let scratch = Scratch {
             schedule: Schedule::new(&model.layout),
-            grid: GridState::new(model.boundary.num_points(&model.layout)),
+            grid: GridState::new(model.boundary.num_points(&model.layout), model.boundary.reads_spline_mass()),
             density_mass: if density { vec![0.0; model.layout.num_nodes()] } else { Vec::new() },
             volume_ratio: if model.smooths_volume_ratio() {
                 VolumeRatio::new(model.layout.num_nodes())

@@ -125,10 +125,15 @@ impl Region<2> for NoFeet<'_> {
     }
 }
 
+/// A zero grid state on the setup's nodes and boundary points (with the B-spline mass where its transfer reads it).
+fn empty_grid(s: &Setup) -> GridState<2> {
+    GridState::new(s.layout.num_nodes() + s.grid.points.len(), s.grid.transfer == AugmentedTransfer::Paper)
+}
+
 /// One P2G → grid update → (wall conditions) → G2P round trip with dt = 0 (positions fixed).
 fn round_trip(s: &Setup, ps: &mut Particles<2>, walls_act: bool) -> GridState<2> {
     let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
-    let mut state = GridState::new(s.layout.num_nodes() + s.grid.points.len());
+    let mut state = empty_grid(s);
     let mut density = vec![0.0; ps.len()];
     p2g(&t, &dust(), ps, None, &mut density, 1e-3, &mut state, &mut VolumeRatio::default());
     let after_p2g = state.clone();
@@ -239,7 +244,7 @@ fn particles_keep_their_spin_across_a_move() {
         ps.x.iter_mut().for_each(|x| *x += normal_in * (0.15 * H));
         let grid_l = |s: &Setup, ps: &Particles<2>| {
             let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
-            let mut state = GridState::new(s.layout.num_nodes() + s.grid.points.len());
+            let mut state = empty_grid(s);
             p2g(&t, &dust(), ps, None, &mut vec![0.0; ps.len()], 1e-3, &mut state, &mut VolumeRatio::default());
             let position = |i: usize| {
                 if i < s.layout.num_nodes() {
@@ -321,7 +326,7 @@ fn volume_ratio_average_keeps_the_volume_next_to_walls() {
             ps.jp[p] = if uniform { 1.1 } else { 0.9 + 0.2 * ((p * 37) % 101) as Real / 101.0 };
         }
         let volume: Real = ps.vol0.iter().zip(&ps.jp).map(|(v, j)| v * j).sum();
-        let mut state = GridState::new(s.layout.num_nodes() + s.grid.points.len());
+        let mut state = empty_grid(&s);
         let mut ratio = VolumeRatio::new(s.layout.num_nodes());
         p2g(&t, &fluid, &ps, None, &mut vec![0.0; ps.len()], 1e-3, &mut state, &mut ratio);
         grid_velocity(&t, &mut state, &Point::zeros(), 1e-3);

@@ -254,8 +254,9 @@ fn prefetch_particle<const D: usize>(particles: &Particles<D>, p: usize) {
 /// Particle→grid transfer of mass and momentum with the stress term. On an augmented grid,
 /// for the particles whose MLS system sees a wall:
 /// - `transfer = "paper"`: `m_i += φ m_p`, `(mv)_i += φ m_p (v_p + C_p (x_i − x_p)) − dt V_p σ_p g`
-///   (eq. (6)), and the B-spline mass `Σ w m_p` that [`grid_velocity`] compares against;
-/// - `transfer = "stable"`: the same with `φ` replaced by the normalised B-spline weight `ŵ = w / Σw`
+///   (eq. (6)), and, of every particle, the B-spline mass `Σ w m_p` that [`grid_velocity`] compares against
+///   (`grid` keeps it only for this transfer);
+/// - `transfer = "stable"`: mass and momentum with `φ` replaced by the normalised B-spline weight `ŵ = w / Σw`
 ///   (Σ over the particle's grid points): every mass is positive, mass is conserved, and P2G is
 ///   the transpose of the G2P fit, so a round trip cannot add kinetic energy.
 ///
@@ -288,7 +289,9 @@ pub fn p2g<const D: usize>(
     let layout = t.layout;
     let (h, inv_h) = (layout.h, 1.0 / layout.h);
     let apic = 4.0 * dt * inv_h * inv_h;
-    let track_spline = t.augmented.is_some();
+    // The B-spline mass, which only the paper's transfer reads (`grid` keeps it then).
+    let track_spline = t.augmented.is_some_and(|(g, _)| g.transfer == AugmentedTransfer::Paper);
+    debug_assert!(!track_spline || grid.keeps_spline_mass(), "the paper's transfer needs the B-spline mass");
     let density_out = Disjoint::new(density);
     let smoothing = !volume_ratio.is_empty();
     let out = P2gOut {
@@ -375,7 +378,6 @@ pub fn p2g<const D: usize>(
                                 let m_i = w * share;
                                 unsafe {
                                     mass.update(i, |m| *m += m_i);
-                                    spline.update(i, |m| *m += m_i);
                                     momentum.update(i, |m| *m += (vp + cp * d) * m_i - force * grad);
                                 }
                             })
@@ -818,7 +820,7 @@ mod tests {
         let mut schedule = Schedule::new(&layout);
         schedule.sort(&layout, &ps.x, &mut Binning::default()).unwrap();
         let t = Transfer { layout: &layout, schedule: &schedule, augmented: None };
-        let mut grid = GridState::new(layout.num_nodes());
+        let mut grid = GridState::new(layout.num_nodes(), false);
         let mut density = vec![0.0; ps.len()];
         p2g(&t, &dust(), &ps, None, &mut density, 1e-3, &mut grid, &mut VolumeRatio::default());
 
@@ -877,7 +879,7 @@ mod tests {
                 ps.jp[p] = if uniform { 1.1 } else { 0.9 + 0.2 * rnd() };
             }
             let (before, volume) = (ps.jp.clone(), ps.vol0.iter().zip(&ps.jp).map(|(v, j)| v * j).sum::<f64>());
-            let mut grid = GridState::new(layout.num_nodes());
+            let mut grid = GridState::new(layout.num_nodes(), false);
             let mut ratio = VolumeRatio::new(layout.num_nodes());
             p2g(&t, &fluid, &ps, None, &mut vec![0.0; ps.len()], 1e-3, &mut grid, &mut ratio);
             grid_velocity(&t, &mut grid, &Vector2::zeros(), 1e-3);
@@ -1007,7 +1009,7 @@ mod tests {
                 // One thread takes the serial forms, two the parallel ones: the sums must not tell.
                 assert_eq!(schedule.parallel(), threads > 1);
                 let t = Transfer { layout: &layout, schedule: &schedule, augmented: None };
-                let mut grid = GridState::new(layout.num_nodes());
+                let mut grid = GridState::new(layout.num_nodes(), false);
                 let mut density = vec![0.0; ps.len()];
                 p2g(&t, &dust(), &ps, None, &mut density, 1e-3, &mut grid, &mut VolumeRatio::default());
                 grid
@@ -1029,7 +1031,7 @@ mod tests {
         schedule.sort(&layout, &ps.x, &mut Binning::default()).unwrap();
         ps.x[7].x += 12.0 * layout.h; // more than a block (8) plus the slack (2)
         let t = Transfer { layout: &layout, schedule: &schedule, augmented: None };
-        let mut grid = GridState::new(layout.num_nodes());
+        let mut grid = GridState::new(layout.num_nodes(), false);
         let mut density = vec![0.0; ps.len()];
         p2g(&t, &dust(), &ps, None, &mut density, 1e-3, &mut grid, &mut VolumeRatio::default());
     }

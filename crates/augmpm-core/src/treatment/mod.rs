@@ -13,7 +13,7 @@ use crate::grid::{GridLayout, OutOfGrid};
 use crate::kernel::{MlsInverse, MlsKind, Stencil};
 use crate::math::{DimOps, Real, Vector};
 use crate::wall::{BoundaryPoint, WallContact, WallImpulses};
-use augmented::{AugmentedGrid, WallParticles};
+use augmented::{AugmentedGrid, AugmentedTransfer, WallParticles};
 use naive::NaiveBoundary;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
@@ -239,6 +239,14 @@ macro_rules! dispatch {
             Boundary::Augmented($t) => $e,
         }
     };
+}
+
+impl<const D: usize> Boundary<D> {
+    /// Whether a step reads the grid's B-spline mass (`GridState::spline_mass`): only the paper's augmented
+    /// transfer does, in its low-mass floor. Elsewhere it would equal the mass, and is not kept.
+    pub fn reads_spline_mass(&self) -> bool {
+        matches!(self, Boundary::Augmented(g) if g.transfer == AugmentedTransfer::Paper)
+    }
 }
 
 impl<const D: usize> WallTreatment<D> for Boundary<D> {
