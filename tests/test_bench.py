@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import statistics
 
 import numpy as np
 import pytest
@@ -117,6 +118,23 @@ def test_rigid_coupling_bench_holds_the_bodies_where_they_are(monkeypatch):
     assert all(r["steps"] == 8 and r["free_over_held"] > 0 and r["free_over_still"] > 0 for r in rows)
     text = bench.format_report({"machine": bench._machine(1), "quick": True, "rows": rows})
     assert "| augmented | 3,767 | 8 |" in text
+
+
+def test_thread_scaling_alternates_one_thread_many_and_the_machines_ceiling():
+    """The thread-scaling case steps the dam break on one thread, on N, and as N one-thread runs at once,
+    the same steps each, in alternating order; its speed-up and the machine's ceiling are the medians of the
+    rounds' ratios, and the report gives them against the 1.85x target."""
+    row = bench.bench_scaling(128, steps=2, threads=2, warm_up=1, rounds=2)
+    assert row["case"] == "scaling_128" and row["threads"] == 2 and row["particles"] > 4_096
+    assert len(row["speedup_rounds"]) == len(row["ceiling_rounds"]) == 2
+    assert row["speedup"] == pytest.approx(statistics.median(row["speedup_rounds"]))
+    assert row["ceiling"] == pytest.approx(statistics.median(row["ceiling_rounds"]))
+    assert all(r > 0 for r in row["speedup_rounds"] + row["ceiling_rounds"])
+    assert {"p2g", "g2p"} <= set(row["stage_speedups"])
+    text = bench.format_report({"machine": bench._machine(2), "quick": True, "rows": [row]})
+    assert "| 128², after 1 steps | " in text and "≥ 1.85× |" in text
+    with pytest.raises(ValueError, match="rounds"):
+        bench.bench_scaling(128, steps=1, threads=2, warm_up=0, rounds=3)
 
 
 def test_memory_is_measured_in_a_fresh_process():

@@ -9,6 +9,10 @@ Cases (issue 5):
   inclined walls) at three sizes, ~8k particles on 128², ~65k on 256², ~530k on 512²: f64 and
   f32, naive and augmented, on 1 and on 2 threads: particle-steps per second, the augmented/naive
   cost ratio, the 2-thread speed-up, peak memory per particle, and the time split per stage;
+- thread scaling (issue 16), with more than one thread: the 256² and 512² naive f64 dam break, well
+  under way, on one thread, on N, and as N one-thread runs at once, alternated round by round: the speed-up
+  over one thread against the machine's own ceiling at that moment (what N runs that share nothing get), per
+  stage too;
 - a 3D fluid dam break in a box tank turned 20° about an axis in no coordinate plane, ~20k particles
   on 32³, ~160k on 64³ and ~1M on 128³: f64 and f32, naive and augmented, on the chosen threads;
 - the cost of output: a paper-scene run with every output (frames, images, animation) against the
@@ -227,6 +231,69 @@ def bench_dam_break(resolution: int, steps: int, threads: tuple[int, ...], dim: 
 
 def _dam_break(resolution: int, dim: int) -> Scene | Scene3:
     return dam_break_scene(resolution) if dim == 2 else dam_break_3d_scene(resolution)
+
+
+#: Issue 16's target for the step's speed-up on two threads over one, at 256² and above.
+SCALING_TARGET = 1.85
+#: Rounds of the thread-scaling case (even: each configuration goes first as often).
+SCALING_ROUNDS = 12
+
+
+def bench_scaling(resolution: int, steps: int, threads: int, warm_up: int, rounds: int = SCALING_ROUNDS) -> dict:
+    """The naive f64 2D dam break at ``resolution`` on one thread, on ``threads`` threads, and as ``threads``
+    one-thread simulations stepped at once (each from a thread of this process; a step runs without the
+    interpreter's lock): the last is what the machine gives work that shares nothing at that moment, the
+    ceiling of the speed-up. Each round steps the three ``steps`` steps in turn, in the reverse order every
+    other round, after ``warm_up`` steps each (the particles mixed as in a long run). The speed-up and the
+    ceiling are the medians of the rounds' ratios; per stage, the ratio of the stage's summed times."""
+    import threading
+
+    if rounds < 2 or rounds % 2:
+        raise ValueError(f"rounds: must be a positive even number (each goes first as often), got {rounds}")
+    scene = dam_break_scene(resolution)
+    one, many = Simulation(scene, "naive", threads=1), Simulation(scene, "naive", threads=threads)
+    apart = [Simulation(scene, "naive", threads=1) for _ in range(threads)]
+    for sim in (one, many, *apart):
+        sim.step(warm_up)
+
+    def at_once() -> None:
+        workers = [threading.Thread(target=sim.step, args=(steps,)) for sim in apart]
+        for w in workers:
+            w.start()
+        for w in workers:
+            w.join()
+
+    runs = {"one": lambda: one.step(steps), "many": lambda: many.step(steps), "apart": at_once}
+    seconds: dict[str, list[float]] = {k: [] for k in runs}
+    before = {"one": one.stage_times(), "many": many.stage_times()}
+    for r in range(rounds):
+        for k in runs if r % 2 == 0 else reversed(runs):
+            t = time.perf_counter()
+            runs[k]()
+            seconds[k].append(time.perf_counter() - t)
+    if any(sim.steps_done != warm_up + rounds * steps for sim in (one, many, *apart)):
+        raise RuntimeError("a simulation of the thread-scaling case did not take every step")
+    speedups = [a / b for a, b in zip(seconds["one"], seconds["many"], strict=True)]
+    ceilings = [threads * a / b for a, b in zip(seconds["one"], seconds["apart"], strict=True)]
+    after = {"one": one.stage_times(), "many": many.stage_times()}
+    stage = {k: {s: after[k][s] - before[k][s] for s in STAGES} for k in after}
+    return {
+        "case": f"scaling_{resolution}",
+        "method": "naive",
+        "precision": "f64",
+        "threads": threads,
+        "particles": one.num_particles,
+        "steps": steps,
+        "rounds": rounds,
+        "warm_up": warm_up,
+        "speedup_rounds": speedups,
+        "ceiling_rounds": ceilings,
+        "speedup": statistics.median(speedups),
+        "ceiling": statistics.median(ceilings),
+        "stage_speedups": {
+            s: stage["one"][s] / stage["many"][s] for s in STAGES if stage["many"][s] > 0 and stage["one"][s] > 0
+        },
+    }
 
 
 #: Peer sizes (``run.sh``'s names) at the dam break's resolutions: 8,192 / 65,536 / 524,288 particles.
@@ -595,6 +662,11 @@ def run_bench(
     for res in sizes:
         log(f"dam break {res}², {steps[res]} steps, threads {thread_counts} …")
         report["rows"] += bench_dam_break(res, steps[res], thread_counts)
+    scaling = {256: (10, 50), 512: (3, 20)} if quick else {256: (20, 200), 512: (5, 50)}
+    for res in (r for r in sizes if r in scaling and threads > 1):
+        chunk, warm_up = scaling[res]
+        log(f"thread scaling {res}²: 1 and {threads} threads, {threads} one-thread runs at once, {warm_up} steps in …")
+        report["rows"].append(bench_scaling(res, chunk, threads, warm_up))
     steps3 = {32: 40, 64: 8} if quick else {32: 200, 64: 40, 128: 8}
     for res in steps3:
         log(f"dam break 3D {res}³, {steps3[res]} steps, threads {threads} …")
@@ -705,6 +777,26 @@ def format_report(report: dict) -> str:
                 f"| {r['method']} | {r['particles']:,} | {r['steps']} "
                 f"| {r['free_over_held']:.2f}× | {r['free_over_still']:.2f}× |"
             )
+        lines.append("")
+    scaling = [r for r in report["rows"] if r["case"].startswith("scaling_")]
+    if scaling:
+        lines += [
+            "| thread scaling (naive f64 dam break; medians of rounds) | particles | threads | speed-up over 1 thread "
+            "| the machine's ceiling: as many one-thread runs at once | speed-up / ceiling | target |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for r in scaling:
+            low, high = min(r["speedup_rounds"]), max(r["speedup_rounds"])
+            lines.append(
+                f"| {r['case'].removeprefix('scaling_')}², after {r['warm_up']} steps | {r['particles']:,} "
+                f"| {r['threads']} | {r['speedup']:.2f}× ({low:.2f}–{high:.2f}×, {r['rounds']}) "
+                f"| {r['ceiling']:.2f}× | {r['speedup'] / r['ceiling']:.2f} | ≥ {SCALING_TARGET}× |"
+            )
+        lines += ["", "| thread scaling per stage (summed times, 1 thread / N) | " + " | ".join(STAGES) + " |"]
+        lines += ["|---|" + "---|" * len(STAGES)]
+        for r in scaling:
+            cells = " | ".join(f"{r['stage_speedups'][s]:.2f}×" if s in r["stage_speedups"] else "–" for s in STAGES)
+            lines.append(f"| {r['case'].removeprefix('scaling_')}², {r['threads']} threads | {cells} |")
         lines.append("")
     peers = [r for r in report["rows"] if r["case"].startswith("peers_")]
     if peers:
