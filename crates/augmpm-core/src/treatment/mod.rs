@@ -127,8 +127,8 @@ impl<const D: usize> WallTreatment<D> for NaiveBoundary<D> {
     fn set_moving(&mut self, wall: usize, moving: bool) {
         self.walls[wall].moving = moving;
     }
-    fn follow(&mut self, _: &GridLayout<D>, _: &dyn Region<D>) {
-        NaiveBoundary::follow(self)
+    fn follow(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>) {
+        NaiveBoundary::follow(self, layout, region)
     }
     fn transfer_view<'a>(&'a self, _: &'a WallParticles<D>) -> Option<(&'a AugmentedGrid<D>, &'a WallParticles<D>)> {
         None
