@@ -235,7 +235,8 @@ def _dam_break(resolution: int, dim: int) -> Scene | Scene3:
 
 #: Issue 16's target for the step's speed-up on two threads over one, at 256² and above.
 SCALING_TARGET = 1.85
-#: Rounds of the thread-scaling case (even: each configuration goes first as often).
+#: Rounds of the thread-scaling case (even: the order is reversed every other round, so that each configuration
+#: runs as often before as after each other one).
 SCALING_ROUNDS = 12
 
 
@@ -243,13 +244,14 @@ def bench_scaling(resolution: int, steps: int, threads: int, warm_up: int, round
     """The naive f64 2D dam break at ``resolution`` on one thread, on ``threads`` threads, and as ``threads``
     one-thread simulations stepped at once (each from a thread of this process; a step runs without the
     interpreter's lock): the last is what the machine gives work that shares nothing at that moment, the
-    ceiling of the speed-up. Each round steps the three ``steps`` steps in turn, in the reverse order every
-    other round, after ``warm_up`` steps each (the particles mixed as in a long run). The speed-up and the
-    ceiling are the medians of the rounds' ratios; per stage, the ratio of the stage's summed times."""
+    ceiling of the speed-up. Each round steps each of the three configurations ``steps`` steps, in turn, in the
+    reverse order every other round, after ``warm_up`` steps each (the particles mixed as in a long run). The
+    speed-up and the ceiling are the medians of the rounds' ratios; per stage, the ratio of the stage's summed
+    times."""
     import threading
 
     if rounds < 2 or rounds % 2:
-        raise ValueError(f"rounds: must be a positive even number (each goes first as often), got {rounds}")
+        raise ValueError(f"rounds: must be a positive even number (the order is reversed every other), got {rounds}")
     scene = dam_break_scene(resolution)
     one, many = Simulation(scene, "naive", threads=1), Simulation(scene, "naive", threads=threads)
     apart = [Simulation(scene, "naive", threads=1) for _ in range(threads)]

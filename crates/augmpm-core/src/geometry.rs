@@ -821,7 +821,9 @@ impl Region<2> for Walls2 {
                 self.sweep = Real::INFINITY;
             } else if after != before {
                 let turn = (after.angle - before.angle).abs() * self.reach(i);
-                self.sweep = self.sweep.max((after.offset - before.offset).norm() + turn);
+                let moved = (after.offset - before.offset).norm() + turn;
+                // A pose gone NaN bounds nothing (`max` would drop the NaN): as in 3D, infinite.
+                self.sweep = if moved.is_nan() { Real::INFINITY } else { self.sweep.max(moved) };
             }
             if let WallShape::Circle(c, _) = &self.walls[i] {
                 self.motions[i].center = Some(c.center);

@@ -22,7 +22,7 @@ pub struct WallNode<const D: usize> {
 #[derive(Clone, Debug)]
 pub struct NaiveBoundary<const D: usize> {
     /// The wall nodes, classified once (still walls; empty when the walls move).
-    pub nodes: Vec<WallNode<D>>,
+    nodes: Vec<WallNode<D>>,
     /// The node of each entry of `nodes`, apart: each step scans these for the few wall nodes that hold
     /// mass, and reads a 48-byte record only for those (on the 256² bench dam break 0.11 ms a step was spent
     /// scanning the records, about 25,000 outside the tilted tank, nearly all without mass).
@@ -40,7 +40,10 @@ pub struct NaiveBoundary<const D: usize> {
 /// changes by at most what they swept (`Region::sweep`), so a node found inside by d stays inside until
 /// the walls have swept d since: the step classifies only the nodes with mass that may be on the wall
 /// side, and a follow looks again only at the nodes whose classification may have changed. The wall nodes
-/// are the same as classifying every node with mass at every step (on the shaken tank 0.3 of its step).
+/// are the same as classifying every node with mass at every step (on the shaken tank 0.3 of its step): by
+/// the bound, up to a rounding slack that covers the distances' own (in f32 ~1e-7 of the domain's size). It
+/// holds as long as a follow comes after every `Region::set_time`, as in `Model::follow_walls`: a sweep
+/// bounds the last move only.
 #[derive(Clone, Debug)]
 struct Follow {
     /// How far (m) the walls may have moved in all since the nodes were first looked at: the sum of every
@@ -65,9 +68,10 @@ impl Follow {
     }
 
     /// Classifies `node` where the walls are now, and says when to look again: once the walls have swept
-    /// its distance, less a rounding slack (distances round, in f32 by ~1e-7 of the domain's size).
+    /// its distance, less a rounding slack (distances round, in f32 by ~1e-7 of the domain's size; the
+    /// slack is 256 ulp of it, at least 1e-6 h, so that nodes within it of a wall are looked at every step).
     fn look<const D: usize>(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>, node: usize) {
-        let slack = (1e-9 * layout.h).max(16.0 * Real::EPSILON * layout.extent().max());
+        let slack = (1e-6 * layout.h).max(256.0 * Real::EPSILON * layout.extent().max());
         let d = region.distance(&layout.position(node)).distance;
         self.inside[node] = d < 0.0;
         self.due[node] = self.swept + crate::math::wide(d.abs() - slack);
