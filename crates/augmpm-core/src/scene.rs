@@ -669,9 +669,10 @@ pub(crate) fn items_positive(schema: &mut schemars::Schema) {
 /// Largest grid accepted (nodes, ghosts included): 16.7 M nodes, about 1 GB of node state.
 pub(crate) const MAX_GRID_NODES: u64 = 1 << 24;
 /// Bytes per grid node, at most: mass, B-spline mass (the paper's augmented transfer only), momentum (2D), the
-/// density's node sums (the grid density's mass, or the smoothed J's volume and volume·J), flags and blocks,
-/// and with moving walls the naive treatment's record of the nodes inside (an f64 and a flag).
-const GRID_BYTES_PER_NODE: u64 = 7 * std::mem::size_of::<Real>() as u64 + 9;
+/// density's node sums (the grid density's mass, or the smoothed J's volume and volume·J), flags and blocks.
+/// Where the B-spline mass is not kept, its place stands for what else a node may hold: with moving walls the
+/// naive treatment's record of the nodes inside (an f64 and a flag, 9 B).
+const GRID_BYTES_PER_NODE: u64 = 7 * std::mem::size_of::<Real>() as u64;
 /// Largest number of jittered candidate points per body: 20 M particles need about 4 GB.
 pub(crate) const MAX_SEED_CANDIDATES: u64 = 20_000_000;
 
