@@ -621,16 +621,9 @@ where
     // Written at each particle's own index; empty when the model keeps no F.
     let f = Disjoint::new(f);
     let piece = t.schedule.min_len(task_len(x.len()));
-    let sum = x
-        .par_iter_mut()
-        .zip(v.par_iter_mut())
-        .zip(c.par_iter_mut())
-        .zip(jp.par_iter_mut())
-        .zip(body.par_iter())
-        .zip(mass.par_iter())
-        .enumerate()
-        .with_min_len(piece)
-        .map(|(p, (((((xp, vp), cp), jpp), m), &mp))| {
+    // One particle's transfer; the loop below calls it over pieces of `piece` particles.
+    let particle =
+        |p: usize, xp: &mut Vector<D>, vp: &mut Vector<D>, cp: &mut Matrix<D>, jpp: &mut Real, m: &u32, mp: Real| {
             let mut vn = Vector::<D>::zeros();
             let mut cn = Matrix::<D>::zeros();
             let mut held = false;
@@ -728,6 +721,26 @@ where
                 max_move: (*xp - before).amax(),
                 fastest: p,
             }
+        };
+    // A piece's particles in a plain loop, which the compiler sees whole: with each particle an item of
+    // the parallel iterator, the f32 build called the body once a particle and G2P took 1.3× as long
+    // (f64 1.05×; measured on the 256² dam break).
+    let sum = x
+        .par_chunks_mut(piece)
+        .zip(v.par_chunks_mut(piece))
+        .zip(c.par_chunks_mut(piece))
+        .zip(jp.par_chunks_mut(piece))
+        .zip(body.par_chunks(piece))
+        .zip(mass.par_chunks(piece))
+        .enumerate()
+        .map(|(k, (((((xs, vs), cs), js), bs), ms))| {
+            let mut sum = G2pSum::NONE;
+            for (j, (((((xp, vp), cp), jpp), m), &mp)) in
+                xs.iter_mut().zip(vs).zip(cs).zip(js).zip(bs).zip(ms).enumerate()
+            {
+                sum = sum.join(particle(k * piece + j, xp, vp, cp, jpp, m, mp));
+            }
+            sum
         })
         .reduce(|| G2pSum::NONE, G2pSum::join);
     let first = |p: usize| (p != usize::MAX).then_some(p);
