@@ -300,7 +300,8 @@ pub fn p2g<const D: usize>(
         momentum: Disjoint::new(&mut grid.momentum),
         volume_ratio: Disjoint::new(&mut volume_ratio.nodes),
     };
-    let P2gOut { mass, spline, momentum, .. } = &out;
+    // Copies of the arrays' pointers (as in the scatters below), which no grid store can alias.
+    let P2gOut { mass, spline, momentum, .. } = out;
     t.schedule.for_each_block(|reach, block| {
         for (k, &p) in block.iter().enumerate() {
             if let Some(&ahead) = block.get(k + PREFETCH_AHEAD) {
@@ -419,7 +420,9 @@ impl<const D: usize> P2gOut<'_, D> {
         origin: usize,
         node: &RegularNode<D>,
     ) {
-        let Self { mass, spline, momentum, .. } = self;
+        // The pointers copied: read through `self`, they were loaded again after every node's stores
+        // (a store might have changed them, as far as the compiler knows).
+        let Self { mass, spline, momentum, .. } = *self;
         let RegularNode { mp, mv, affine } = *node;
         // The farthest node of the stencil: one bounds check for the 3^D writes.
         let last = last_node(layout, origin);
@@ -442,10 +445,11 @@ impl<const D: usize> P2gOut<'_, D> {
     #[inline]
     unsafe fn scatter_volume(&self, layout: &GridLayout<D>, s: &Stencil<D>, origin: usize, volumes: (Real, Real)) {
         let (v0, v0j) = volumes;
-        assert!(last_node(layout, origin) < self.volume_ratio.len());
+        let volume_ratio = self.volume_ratio;
+        assert!(last_node(layout, origin) < volume_ratio.len());
         // SAFETY: i ≤ the stencil's last node, in bounds (checked above); exclusive by the caller.
         s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| unsafe {
-            self.volume_ratio.update_unchecked(i, |g| {
+            volume_ratio.update_unchecked(i, |g| {
                 g.0 += w * v0;
                 g.1 += w * v0j;
             })
