@@ -316,6 +316,14 @@ pub fn energy_root<const D: usize>(m: Real, v: &Vector<D>) -> f64 {
     f64::from(m).sqrt() * v.iter().map(|&a| f64::from(a).powi(2)).sum::<f64>().sqrt()
 }
 
+/// Whether m |v|², twice a particle's kinetic energy, is within the f64 range: `energy_root(m, v)² < f64::MAX`
+/// up to rounding (both fail when |v|² alone overflows), without its two square roots.
+#[inline]
+#[allow(clippy::useless_conversion)] // as above
+pub fn energy_in_range<const D: usize>(m: Real, v: &Vector<D>) -> bool {
+    (f64::from(m) * v.iter().map(|&a| f64::from(a).powi(2)).sum::<f64>()).is_finite()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -358,5 +366,33 @@ mod tests {
             }
         }
         assert_eq!(p, q);
+    }
+
+    /// `energy_in_range` agrees with `energy_root(m, v) < √f64::MAX`, the form the kinetic energy sums, for
+    /// masses and velocities over the whole range, except within rounding of the boundary (m |v|² within
+    /// 10⁻¹² of f64::MAX relative).
+    #[test]
+    #[allow(clippy::useless_conversion)] // `Real` is f64 here, f32 in augmpm-core-f32
+    fn energy_in_range_is_energy_root_below_the_root_of_the_largest_float() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+        let (lo, hi) = (Real::MIN_POSITIVE.log10(), Real::MAX.log10());
+        let mut tried = [0; 2];
+        for _ in 0..20_000 {
+            let m: Real = (10.0 as Real).powf(rng.gen_range(lo..hi));
+            let v = Vector::<2>::from_fn(|_, _| {
+                let sign = if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
+                sign * (10.0 as Real).powf(rng.gen_range(lo..hi))
+            });
+            let two_e = f64::from(m).ln() + v.iter().map(|&a| f64::from(a).powi(2)).sum::<f64>().ln();
+            if (two_e - f64::MAX.ln()).abs() < 1e-12 * f64::MAX.ln() {
+                continue;
+            }
+            let by_root = energy_root(m, &v) < f64::MAX.sqrt();
+            assert_eq!(energy_in_range(m, &v), by_root, "m = {m}, v = {v}");
+            tried[usize::from(by_root)] += 1;
+        }
+        // Both sides of the boundary were seen.
+        assert!(tried[0] > 1000 && tried[1] > 1000, "{tried:?}");
     }
 }

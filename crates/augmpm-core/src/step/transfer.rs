@@ -702,6 +702,11 @@ where
             if smooths {
                 *jpp = jbar;
             }
+            // `a · 0` is ±0 for a finite `a` and NaN otherwise, so the sum is ±0 exactly when all are finite
+            // (no branch per value). F counts where it is kept (elsewhere it is I). The particle's kinetic
+            // energy must be representable too, or the run's energy is garbage.
+            let zero_if_finite = |s: Real, &a: &Real| s + a * 0.0;
+            let mut finite_sum = xp.iter().chain(vp.iter()).fold(0.0, zero_if_finite);
             let mut fp = Matrix::<D>::identity();
             if p < f.len() {
                 // SAFETY: in bounds, and each particle is visited once.
@@ -711,12 +716,9 @@ where
             if p < f.len() {
                 // SAFETY: as above.
                 unsafe { f.update(p, |fq| *fq = fp) };
+                finite_sum = fp.iter().fold(finite_sum, zero_if_finite);
             }
-            // `a · 0` is ±0 for a finite `a` and NaN otherwise, so the sum is ±0 exactly when all are finite
-            // (no branch per value). The particle's kinetic energy must be representable too, or the
-            // run's energy is garbage.
-            let finite = xp.iter().chain(vp.iter()).chain(fp.iter()).fold(0.0, |s: Real, &a| s + a * 0.0) == 0.0
-                && crate::particles::energy_root(mp, vp) < f64::MAX.sqrt();
+            let finite = finite_sum == 0.0 && crate::particles::energy_in_range(mp, vp);
             G2pSum {
                 held: usize::from(held),
                 non_finite: if finite { usize::MAX } else { p },
