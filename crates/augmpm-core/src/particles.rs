@@ -369,8 +369,8 @@ mod tests {
     }
 
     /// `energy_in_range` agrees with `energy_root(m, v) < √f64::MAX`, the form the kinetic energy sums, for
-    /// masses and velocities over the whole range, except within rounding of the boundary (m |v|² within
-    /// 10⁻¹² of f64::MAX relative).
+    /// masses and velocities over the whole range, except within rounding of the boundary (m |v|² within a
+    /// factor 1 ± 10⁻⁹ of f64::MAX: its logarithm within 10⁻¹² ln MAX of ln MAX).
     #[test]
     #[allow(clippy::useless_conversion)] // `Real` is f64 here, f32 in augmpm-core-f32
     fn energy_in_range_is_energy_root_below_the_root_of_the_largest_float() {
