@@ -297,7 +297,7 @@ impl<const D: usize> Particles<D> {
     }
 
     /// Total kinetic energy ½ Σ m v² (J, or J/m in 2D), summed in particle order in f64 as
-    /// ½ Σ (√m |v|)², which overflows only when the energy itself is beyond the f64 range.
+    /// ½ Σ (√m |v|)² ([`energy_root`]).
     pub fn kinetic_energy(&self) -> f64 {
         0.5 * self.mass.iter().zip(&self.v).map(|(&m, v)| energy_root(m, v).powi(2)).sum::<f64>()
     }
@@ -308,20 +308,22 @@ impl<const D: usize> Particles<D> {
     }
 }
 
-/// √(m) |v| in f64: its square is twice a particle's kinetic energy, finite exactly when that
-/// energy is within the f64 range (m |v|² itself can overflow first).
+/// √(m) |v| in f64: its square is twice a particle's kinetic energy. Infinite when |v|² is beyond the f64
+/// range, NaN for a negative or NaN mass.
 #[inline]
 #[allow(clippy::useless_conversion)] // `Real` is f64 here, f32 in augmpm-core-f32
 pub fn energy_root<const D: usize>(m: Real, v: &Vector<D>) -> f64 {
     f64::from(m).sqrt() * v.iter().map(|&a| f64::from(a).powi(2)).sum::<f64>().sqrt()
 }
 
-/// Whether m |v|², twice a particle's kinetic energy, is within the f64 range: `energy_root(m, v)² < f64::MAX`
-/// up to rounding (both fail when |v|² alone overflows), without its two square roots.
+/// Whether m |v|², twice a particle's kinetic energy, is within the f64 range: `energy_root(m, v) < √f64::MAX`
+/// up to rounding at that boundary, without its two square roots. Both fail when |v|² alone overflows, and for
+/// a negative, infinite or NaN mass.
 #[inline]
 #[allow(clippy::useless_conversion)] // as above
 pub fn energy_in_range<const D: usize>(m: Real, v: &Vector<D>) -> bool {
-    (f64::from(m) * v.iter().map(|&a| f64::from(a).powi(2)).sum::<f64>()).is_finite()
+    let m = f64::from(m);
+    m >= 0.0 && (m * v.iter().map(|&a| f64::from(a).powi(2)).sum::<f64>()).is_finite()
 }
 
 #[cfg(test)]
@@ -368,13 +370,40 @@ mod tests {
         assert_eq!(p, q);
     }
 
-    /// `energy_in_range` agrees with `energy_root(m, v) < √f64::MAX`, the form the kinetic energy sums, for
-    /// masses and velocities over the whole range, except within rounding of the boundary (m |v|² within a
-    /// factor 1 ± 10⁻⁹ of f64::MAX: its logarithm within 10⁻¹² ln MAX of ln MAX).
+    /// `energy_in_range` agrees with `energy_root(m, v) < √f64::MAX`, the form the kinetic energy sums: for
+    /// positive masses and speeds drawn over the whole f64 range, except within rounding of the boundary
+    /// (m |v|² within a factor 1 ± 7·10⁻¹⁰ of f64::MAX: its logarithm within 10⁻¹² ln MAX of ln MAX), and for
+    /// zero, negative, subnormal, infinite and NaN masses and velocity components, in 2D and 3D. f64 only: in
+    /// f32 no particle's energy reaches the f64 range.
+    #[cfg(not(feature = "f32"))]
     #[test]
-    #[allow(clippy::useless_conversion)] // `Real` is f64 here, f32 in augmpm-core-f32
     fn energy_in_range_is_energy_root_below_the_root_of_the_largest_float() {
         use rand::{Rng, SeedableRng};
+        let by_root = |m: Real, v: &[Real]| {
+            if v.len() == 2 {
+                energy_root(m, &Vector::<2>::from_column_slice(v)) < f64::MAX.sqrt()
+            } else {
+                energy_root(m, &Vector::<3>::from_column_slice(v)) < f64::MAX.sqrt()
+            }
+        };
+        let in_range = |m: Real, v: &[Real]| {
+            if v.len() == 2 {
+                energy_in_range(m, &Vector::<2>::from_column_slice(v))
+            } else {
+                energy_in_range(m, &Vector::<3>::from_column_slice(v))
+            }
+        };
+        let masses = [0.0, -0.0, 1.0, -1.0, 5e-324, Real::INFINITY, Real::NEG_INFINITY, Real::NAN];
+        let parts = [0.0, -2.0, 1e200, Real::INFINITY, Real::NAN];
+        for &m in &masses {
+            for &a in &parts {
+                for &b in &parts {
+                    for v in [vec![a, b], vec![b, 1.0, a]] {
+                        assert_eq!(in_range(m, &v), by_root(m, &v), "m = {m}, v = {v:?}");
+                    }
+                }
+            }
+        }
         let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
         let (lo, hi) = (Real::MIN_POSITIVE.log10(), Real::MAX.log10());
         let mut tried = [0; 2];
@@ -384,7 +413,7 @@ mod tests {
                 let sign = if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
                 sign * (10.0 as Real).powf(rng.gen_range(lo..hi))
             });
-            let two_e = f64::from(m).ln() + v.iter().map(|&a| f64::from(a).powi(2)).sum::<f64>().ln();
+            let two_e = m.ln() + v.iter().map(|&a| a.powi(2)).sum::<f64>().ln();
             if (two_e - f64::MAX.ln()).abs() < 1e-12 * f64::MAX.ln() {
                 continue;
             }
