@@ -308,8 +308,8 @@ impl<const D: usize> Particles<D> {
     }
 }
 
-/// √(m) |v| in f64: its square is twice a particle's kinetic energy. Infinite when |v|² is beyond the f64
-/// range, NaN for a negative or NaN mass.
+/// √(m) |v| in f64: its square is twice a particle's kinetic energy. Infinite when m or |v|² is beyond the
+/// f64 range (NaN if the other factor is 0), NaN for a negative or NaN mass.
 #[inline]
 #[allow(clippy::useless_conversion)] // `Real` is f64 here, f32 in augmpm-core-f32
 pub fn energy_root<const D: usize>(m: Real, v: &Vector<D>) -> f64 {
