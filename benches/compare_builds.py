@@ -8,9 +8,10 @@ wheel: `maturin build --release`). Both step the same dam break (`augmpm.bench.d
 `dam_break_3d_scene` with `--dim 3`), or the scene file (or shipped scene's name) of `--scene`, built once
 each, `--steps` steps a round, in alternating order (A B, B A, …), so that the machine's drift and the run
 order fall on both alike. Printed per stage (the engine's stage timers, ns a particle-step): the median of
-each build, the median and range of the round-by-round ratio A/B, and the ratio of the fastest rounds (on a
-shared machine interference mostly slows a round down). Whole-process timings include
-start-up and scene building; this does not.
+each build, the median and range of the round-by-round ratio A/B, the ratio of the fastest rounds (on a
+shared machine interference mostly slows a round down), and a 95% confidence interval for the median ratio
+(`median_interval`; from 6 rounds on): a change whose interval holds 1 is not told from noise. Whole-process
+timings include start-up and scene building; this does not.
 
 The scene is built by the installed `augmpm`: both builds must read its scene format. The same file given
 twice is one library, loaded once: the two then share an engine module (an A/A run).
@@ -23,6 +24,7 @@ import importlib.machinery
 import importlib.util
 import statistics
 import time
+from math import comb
 from pathlib import Path
 
 from augmpm import bench
@@ -38,6 +40,24 @@ def load_engine(label: str, path: Path):
     module = importlib.util.module_from_spec(spec)
     loader.exec_module(module)
     return module
+
+
+def median_interval(values: list[float], confidence: float = 0.95) -> tuple[float, float] | None:
+    """A distribution-free confidence interval for the median of `values`, taken as independent draws (the
+    sign test's): the k-th smallest and the k-th largest, with k the largest for which fewer than k of n
+    draws fall below the median with probability at most (1 − confidence)/2, a binomial(n, ½) tail. None
+    when no k qualifies (fewer than 6 values at 95%)."""
+    n = len(values)
+    tail, k, below = (1.0 - confidence) / 2.0, 0, 0.0
+    for j in range(n + 1):
+        below += comb(n, j) / 2.0**n
+        if below > tail:
+            break
+        k = j + 1
+    if k == 0:
+        return None
+    ordered = sorted(values)
+    return ordered[k - 1], ordered[n - k]
 
 
 def main() -> None:
@@ -101,7 +121,7 @@ def main() -> None:
         f"{what}, {args.method}, {args.threads} thread(s), {args.warm_up} steps, "
         f"then {args.rounds} rounds of {args.steps} steps; ns a particle-step"
     )
-    print(f"{'stage':9s} {'A':>7s} {'B':>7s}  {'A/B rounds: median [range]':28s} fastest A/B")
+    print(f"{'stage':9s} {'A':>7s} {'B':>7s}  {'A/B rounds: median [range]':28s} fastest A/B  median's 95% interval")
     for stage in rounds["A"][0]:
         a = [row[stage] for row in rounds["A"]]
         b = [row[stage] for row in rounds["B"]]
@@ -109,7 +129,12 @@ def main() -> None:
         if not ratios or min(b) <= 0:
             continue
         spread = f"{statistics.median(ratios):.3f} [{min(ratios):.2f}, {max(ratios):.2f}]"
-        print(f"{stage:9s} {statistics.median(a):7.1f} {statistics.median(b):7.1f}  {spread:28s} {min(a) / min(b):.3f}")
+        interval = median_interval(ratios)
+        within = "–" if interval is None else f"[{interval[0]:.3f}, {interval[1]:.3f}]"
+        print(
+            f"{stage:9s} {statistics.median(a):7.1f} {statistics.median(b):7.1f}  {spread:28s} "
+            f"{min(a) / min(b):11.3f}  {within}"
+        )
 
 
 if __name__ == "__main__":

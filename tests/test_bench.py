@@ -262,6 +262,8 @@ def test_compare_builds_alternates_two_builds_in_one_process():
     assert {"step", "p2g", "g2p"} <= rows.keys()
     a, b, median, fastest = (float(rows["step"][i].strip("[],")) for i in (0, 1, 2, 5))
     assert a > 0 and b > 0
+    # Four rounds are too few for the median's 95% interval.
+    assert rows["step"][6] == "–"
     # One engine twice: only the machine's noise separates the rounds (single rounds vary up to 2× here).
     assert 0.3 < median < 3 and 0.3 < fastest < 3
     refused = subprocess.run([*args, "--rounds", "3"], capture_output=True, text=True, timeout=60)
@@ -278,3 +280,31 @@ def test_compare_builds_alternates_two_builds_in_one_process():
     assert missing.returncode == 2 and "--scene: no/such_scene" in missing.stderr
     both = subprocess.run([*on_scene, "paper/fluid_incline_noslip", "--dim", "3"], capture_output=True, text=True)
     assert both.returncode == 2 and "--dim and --resolution" in both.stderr
+
+
+def test_median_interval_is_the_sign_tests():
+    """The 95% interval compare_builds gives for a median ratio covers the median of any continuous
+    distribution with probability at least 95% (binomial tails of n draws about it, halves of at most
+    2.5% each), and is the narrowest pair of order statistics that does: at n = 30, the 10th and 21st
+    smallest (coverage 95.7%), at n = 60 the 22nd and 39th; none below 6 draws."""
+    import importlib.util
+    from math import comb
+
+    spec = importlib.util.spec_from_file_location("compare_builds", ROOT / "benches" / "compare_builds.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    draws = [float(v) for v in range(1, 81)]
+    assert module.median_interval(draws[:30]) == (10.0, 21.0)
+    assert module.median_interval(draws[:60]) == (22.0, 39.0)
+    assert module.median_interval(draws[:5]) is None and module.median_interval(draws[:6]) == (1.0, 6.0)
+    # The order does not matter, and the coverage is at least the confidence, one rank inward it is not.
+    rng = np.random.default_rng(3)
+    for n in (6, 7, 12, 30, 31, 60, 80):
+        values = list(rng.permutation(draws[:n]))
+        low, high = module.median_interval(values)
+        k = int(low)
+        assert high == n + 1 - k
+        outside = sum(comb(n, j) for j in range(k)) / 2**n
+        assert 1 - 2 * outside >= 0.95
+        inward = sum(comb(n, j) for j in range(k + 1)) / 2**n
+        assert 1 - 2 * inward < 0.95
