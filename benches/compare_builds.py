@@ -48,10 +48,11 @@ def median_interval(values: list[float], confidence: float = 0.95) -> tuple[floa
     draws fall below the median with probability at most (1 − confidence)/2, a binomial(n, ½) tail. None
     when no k qualifies (fewer than 6 values at 95%)."""
     n = len(values)
-    tail, k, below = (1.0 - confidence) / 2.0, 0, 0.0
+    # Counted in integers (2ⁿ overflows a float from n = 1,024 on; an integer quotient does not).
+    tail, k, below = (1.0 - confidence) / 2.0, 0, 0
     for j in range(n + 1):
-        below += comb(n, j) / 2.0**n
-        if below > tail:
+        below += comb(n, j)
+        if below / 2**n > tail:
             break
         k = j + 1
     if k == 0:
