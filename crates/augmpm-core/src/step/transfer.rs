@@ -329,8 +329,14 @@ pub fn p2g<const D: usize>(
             };
             // SAFETY (every `update` below): each particle is in one block, and blocks scattered
             // together never share a grid point (see `schedule`).
-            unsafe { density_out.update(p, |d| *d = material.current_density(&point)) };
-            let stress = material.volume_stress(&point);
+            // A fluid's density and stress in one call, the density computed once: P2G 0.976× its time
+            // (95% interval of the median 0.965–0.989; 256² dam break, one thread, 40 rounds), bitwise the
+            // same. The same as a method of every model, dispatched over the five, took 1.047×.
+            let (rho_p, stress) = match material {
+                Material::Fluid(fluid) => fluid.density_and_volume_stress(&point),
+                _ => (material.current_density(&point), material.volume_stress(&point)),
+            };
+            unsafe { density_out.update(p, |d| *d = rho_p) };
             if let Some(volumes) = volumes {
                 // J is smoothed over the regular grid, near walls too: one loop for every particle, as
                 // fast as the same sums fused into the momentum's loop (measured).
