@@ -92,9 +92,7 @@ impl WeaklyCompressibleFluid {
     pub fn cauchy_stress<const D: usize>(&self, rho: Real, grad_v: &Matrix<D>) -> Matrix<D> {
         Matrix::<D>::identity() * -self.pressure(rho) + (grad_v + grad_v.transpose()) * self.viscosity
     }
-}
 
-impl WeaklyCompressibleFluid {
     /// The density the stress sees at `p` ([`ConstitutiveModel::current_density`]) and `V_p σ_p`
     /// ([`ConstitutiveModel::volume_stress`]) together, the density computed once.
     #[inline(always)]
