@@ -642,9 +642,13 @@ def run_bench(
     sizes: tuple[int, ...] | None = None,
     log=print,
     peers: Path | None = None,
+    ops: bool = False,
 ) -> dict:
-    """Every case; returns the report (also what ``--json`` writes)."""
+    """Every case; returns the report (also what ``--json`` writes). With ``ops``, also each stage's
+    instructions and floating-point operations per particle-step, counted under callgrind
+    (:mod:`augmpm.opcount`) on the 256² dam break (128² with ``quick``)."""
     from augmpm import _core
+    from augmpm.opcount import count_ops, missing_tools
     from augmpm.simulation import resolve_threads
 
     fig1 = scene_path(fig1)
@@ -652,6 +656,8 @@ def run_bench(
         raise _core.SceneError(f"--fig1: {fig1} not found (a scene file, or a shipped scene's name)")
     if peers is not None and not (Path(peers) / "run.sh").is_file():
         raise _core.SceneError(f"--peers: {Path(peers) / 'run.sh'} not found (the folder of the peer engines' run.sh)")
+    if ops and (missing := missing_tools()):
+        raise _core.SceneError(f"--ops: counting needs {' and '.join(missing)} on PATH, not found")
     threads = resolve_threads(threads)
     sizes = sizes or ((128, 256) if quick else (128, 256, 512))
     thread_counts = tuple(sorted({1, threads}))
@@ -664,6 +670,10 @@ def run_bench(
     for res in sizes:
         log(f"dam break {res}², {steps[res]} steps, threads {thread_counts} …")
         report["rows"] += bench_dam_break(res, steps[res], thread_counts)
+    if ops:
+        res = 128 if quick else 256
+        log(f"operations per particle-step under callgrind, dam break {res}², one thread, 3 steps after 3 …")
+        report["ops"] = [count_ops(res, m, p) for p in PRECISIONS for m in METHODS]
     scaling = {256: (10, 50), 512: (3, 20)} if quick else {256: (20, 200), 512: (5, 50)}
     for res in (r for r in sizes if r in scaling and threads > 1):
         chunk, warm_up = scaling[res]
@@ -847,8 +857,8 @@ def _roofline(report: dict, rows: list[dict]) -> list[str]:
     lines = [
         f"Roofline: memory bandwidth {roofs['bandwidth_GBps']:.1f} GB/s and f64 peak "
         + f"{roofs['peak_GFLOPs']:.0f} GFLOP/s measured on {roofs['threads']} threads. Per stage: particle "
-        + "bytes per particle-step / GB/s reached (share of the bandwidth). Operations per stage are not "
-        + "counted: this machine kind exposes no floating-point counters.",
+        + "bytes per particle-step / GB/s reached (share of the bandwidth). Operations: see below (`--ops`; this "
+        + "machine kind exposes no hardware counters, so they are counted under callgrind).",
         "",
         "| dam break, config | " + " | ".join(stages) + " |",
         "|---|" + "---|" * len(stages),
@@ -865,6 +875,55 @@ def _roofline(report: dict, rows: list[dict]) -> list[str]:
             cells.append(f"{moved[stage]} B / {rate:.1f} ({100 * rate / roofs['bandwidth_GBps']:.0f}%)")
         label = f"{r['case']} {r['precision']} {r['method']} {r['threads']}t"
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    lines.append("")
+    return lines + _operations(report, rows)
+
+
+def _operations(report: dict, rows: list[dict]) -> list[str]:
+    """The operations table (``--ops``): per counted configuration and stage, the instructions, floating-point
+    operations (those in scalar instructions) and divisions and square roots per particle-step, and the
+    rates they make at each timed row's stage time: instructions and operations per second, the latter's
+    share of the machine's f64 peak."""
+    counted = report.get("ops")
+    if not counted:
+        return []
+    peak = report.get("roofs", {}).get("peak_GFLOPs")
+    first = counted[0]
+    lines = [
+        f"Operations per particle-step, counted under callgrind on one thread (steps {first['warm_up'] + 1}–"
+        + f"{first['warm_up'] + first['steps']} of the dam break; `--ops`): flops are adds, subtracts, multiplies, "
+        + "divisions and square roots, one a lane, and fused multiply-adds, two a lane; of them, those in scalar "
+        + "(one-lane) instructions. The rates are those counts at each timed row's stage time"
+        + (f"; the flop rate's share of the f64 peak ({peak:.0f} GFLOP/s)." if peak else "."),
+        "",
+        "| dam break, config | stage | instructions | flops (scalar) | divisions, roots | G instructions/s | GFLOP/s |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for c in counted:
+        timed = [
+            r
+            for r in rows
+            if (r["case"], r["precision"], r["method"]) == (c["case"], c["precision"], c["method"])
+            and r.get("dim", 2) == 2
+        ]
+        for stage, n in c["stages"].items():
+            if stage not in ("boundary", "p2g", "g2p", "step") or n["instructions"] < 1:
+                continue
+            for r in timed or [None]:
+                label = f"{c['case']} {c['precision']} {c['method']}" + (f" {r['threads']}t" if r else "")
+                rates = ["–", "–"]
+                seconds = 0.0
+                if r is not None:
+                    seconds = sum(r["stages_s"].values()) if stage == "step" else r["stages_s"].get(stage, 0.0)
+                if seconds > 0:
+                    per_s = r["particles"] * r["steps"] / seconds
+                    gflops = n["flops"] * per_s / 1e9
+                    share = f" ({100 * gflops / peak:.0f}%)" if peak else ""
+                    rates = [f"{n['instructions'] * per_s / 1e9:.1f}", f"{gflops:.1f}{share}"]
+                lines.append(
+                    f"| {label} | {stage} | {n['instructions']:.0f} | {n['flops']:.0f} ({n['scalar_flops']:.0f}) "
+                    + f"| {n['div_sqrt']:.1f} | {rates[0]} | {rates[1]} |"
+                )
     lines.append("")
     return lines
 

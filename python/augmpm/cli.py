@@ -85,6 +85,12 @@ def _parser() -> argparse.ArgumentParser:
         metavar="DIR",
         help="also run the peer engines of DIR/run.sh (mpm88 in Taichi and Rust) alongside the 2D dam break",
     )
+    b.add_argument(
+        "--ops",
+        action="store_true",
+        help="also count each stage's instructions and floating-point operations per particle-step under "
+        + "valgrind's callgrind (needs valgrind and objdump; ~3 minutes more)",
+    )
 
     w = sub.add_parser("sweep", help="run a scene over a grid and/or random samples of its keys, on Dask")
     w.add_argument("spec", type=Path, help="sweep spec (TOML): the base scene and what to vary")
@@ -292,6 +298,7 @@ def _bench(args: argparse.Namespace) -> int:
     import subprocess
 
     from augmpm.bench import PeerError, format_report, run_bench
+    from augmpm.opcount import OpCountError
 
     try:
         report = run_bench(
@@ -300,8 +307,9 @@ def _bench(args: argparse.Namespace) -> int:
             threads=args.threads,
             log=lambda s: print(s, file=sys.stderr),
             peers=args.peers,
+            ops=args.ops,
         )
-    except (_core.SimulationError, subprocess.CalledProcessError, PeerError) as e:
+    except (_core.SimulationError, subprocess.CalledProcessError, PeerError, OpCountError) as e:
         detail = getattr(e, "stderr", None) or ""
         print(f"augmpm: benchmark failed: {e}\n{detail}".rstrip(), file=sys.stderr)
         return EXIT_FAILED_RUN

@@ -387,6 +387,10 @@ impl Lap {
         Self(Instant::now())
     }
 
+    /// Never inlined: the step calls it once at the end of each stage, so that a tool can cut the step
+    /// into the same stages as these times (`augmpm bench --ops` counts each stage's operations with
+    /// callgrind, dumping at each return from here).
+    #[inline(never)]
     fn add_to(&mut self, total: &mut f64) {
         let now = Instant::now();
         *total += (now - self.0).as_secs_f64();

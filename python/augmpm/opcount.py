@@ -1,0 +1,281 @@
+"""Instructions and floating-point operations per particle-step of each stage, counted with callgrind.
+
+The machines this project is measured on expose no hardware counters, so the roofline's operations are
+counted instead of sampled: a dam break is stepped on one thread under valgrind's callgrind, which dumps its
+counts each time the step ends a stage (the engine's stage timer, never inlined, is where it cuts) and at the
+end of each step. Every executed instruction is then weighed by the floating-point operations it performs,
+read from the disassembly of its object (``objdump``): an add, subtract, multiply, divide or square root is
+one operation a lane, a fused multiply-add two; comparisons, minima, maxima, conversions and logic are none.
+The counts are exact for the code that ran under valgrind, which reports a CPU without AVX-512 to the
+program: code that picks its path at run time (libm's ``exp``) may run another path natively.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+# The engine's step and its stage timer (their demangled names, in both precisions' cores). The step
+# toggles counting; a dump before each call of the timer closes the stage it times.
+STEP_FUNCTION = "*step_here"
+LAP_FUNCTION = "*::simulation::Lap::add_to"
+
+_ARITHMETIC = re.compile(r"^v?(add|sub|mul|div|sqrt)(ss|sd|ps|pd)$")
+_FUSED = re.compile(r"^v?f(?:n?m(?:add|sub)|maddsub|msubadd)(?:132|213|231)(ss|sd|ps|pd)$")
+
+
+class OpCountError(RuntimeError):
+    """Counting could not run (valgrind or objdump missing) or its output was not understood."""
+
+
+@dataclass(frozen=True)
+class Ops:
+    """What one instruction does: floating-point operations, whether they are scalar (one lane), and whether
+    it is a division or square root (long latency, not pipelined like the rest)."""
+
+    flops: int = 0
+    scalar: bool = True
+    divide: bool = False
+
+
+def instruction_ops(mnemonic: str, operands: str = "") -> Ops:
+    """The floating-point operations of an x86-64 instruction as ``objdump`` prints it: one per lane for
+    an SSE/AVX add, subtract, multiply, divide or square root, two per lane for a fused multiply-add; the
+    lanes from the widest register among the operands (xmm 128 bits, ymm 256, zmm 512)."""
+    if m := _ARITHMETIC.match(mnemonic):
+        kind, per_lane = m.group(2), 1
+    elif m := _FUSED.match(mnemonic):
+        kind, per_lane = m.group(1), 2
+    else:
+        return Ops()
+    divide = mnemonic.lstrip("v").startswith(("div", "sqrt"))
+    if kind in ("ss", "sd"):
+        return Ops(per_lane, True, divide)
+    width = 512 if "%zmm" in operands else 256 if "%ymm" in operands else 128
+    lanes = width // (32 if kind == "ps" else 64)
+    return Ops(per_lane * lanes, False, divide)
+
+
+@dataclass
+class Dump:
+    """One callgrind dump: what triggered it and the instructions executed at each (object, address)
+    since the dump before, calls' inclusive costs left out."""
+
+    trigger: str
+    total: int
+    counts: dict[tuple[str, int], int] = field(default_factory=dict)
+
+
+def _position(token: str, last: int) -> int:
+    if token == "*":
+        return last
+    if token[0] in "+-":
+        return last + int(token, 0)
+    return int(token, 0)
+
+
+def parse_dump(text: str) -> Dump:
+    """A callgrind output file written with ``--dump-instr=yes`` (positions ``instr line``, event ``Ir``),
+    name and position compression included. Checks that the instruction counts add up to its totals."""
+    objects: dict[str, str] = {}
+    trigger, totals, obj = "", None, "???"
+    counts: dict[tuple[str, int], int] = defaultdict(int)
+    last, skip_next = 0, False
+    positions = ["instr", "line"]
+    for line in text.splitlines():
+        if not line or line.startswith("#"):
+            continue
+        head = line[0]
+        if head.isdigit() or head in "+-*":
+            fields = line.split()
+            if len(fields) < len(positions) + 1:
+                raise OpCountError(f"callgrind: a cost line without its {positions} and cost: {line!r}")
+            address = _position(fields[0], last)
+            last = address
+            if skip_next:  # the inclusive cost of the call named on the line before
+                skip_next = False
+                continue
+            counts[(obj, address)] += int(fields[len(positions)])
+            continue
+        key, _, value = line.partition("=") if "=" in line.split(":", 1)[0] else line.partition(":")
+        value = value.strip()
+        if key == "ob":
+            m = re.match(r"\((\d+)\)(?: (.*))?$", value)
+            if m:
+                if m.group(2) is not None:
+                    objects[m.group(1)] = m.group(2)
+                obj = objects.get(m.group(1), "???")
+            else:
+                obj = value
+        elif key == "cob" and value.startswith("(") and ")" in value:
+            # A called object's name may be given here first; later `ob=(id)` lines refer to it.
+            m = re.match(r"\((\d+)\) (.*)$", value)
+            if m:
+                objects[m.group(1)] = m.group(2)
+        elif key == "calls":
+            skip_next = True
+        elif key == "positions":
+            positions = value.split()
+            if positions[0] != "instr":
+                raise OpCountError(f"callgrind: positions {value!r}: run it with --dump-instr=yes")
+        elif key == "events" and value.split()[0] != "Ir":
+            raise OpCountError(f"callgrind: events {value!r}: the first must be Ir")
+        elif key == "desc" and value.startswith("Trigger:"):
+            trigger = value.removeprefix("Trigger:").strip()
+        elif key == "totals" or (key == "summary" and totals is None):
+            totals = int(value.split()[0])
+    total = sum(counts.values())
+    if totals is not None and total != totals:
+        raise OpCountError(f"callgrind: instruction counts add up to {total}, its totals say {totals}")
+    return Dump(trigger, total, dict(counts))
+
+
+def disassemble(path: str, addresses: set[int]) -> dict[int, tuple[str, str]]:
+    """The mnemonic and operands of each instruction at ``addresses`` (the object's own, as callgrind
+    gives them for shared objects) in the object at ``path``, by ``objdump -d``."""
+    out = subprocess.run(
+        ["objdump", "-d", "-w", "--no-show-raw-insn", path],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    found: dict[int, tuple[str, str]] = {}
+    for line in out.splitlines():
+        address, tab, rest = line.partition(":\t")
+        if not tab:
+            continue
+        try:
+            a = int(address.strip(), 16)
+        except ValueError:
+            continue
+        if a in addresses:
+            mnemonic, _, operands = rest.strip().partition(" ")
+            found[a] = (mnemonic, operands.strip())
+    return found
+
+
+def weigh(dumps: list[Dump]) -> tuple[list[dict], int]:
+    """Per dump: instructions, floating-point operations, those in scalar instructions, and divisions and
+    square roots; and the instructions that could not be read from their object's disassembly (objects
+    outside the file system, such as the vDSO), which count no operations."""
+    wanted: dict[str, set[int]] = defaultdict(set)
+    for d in dumps:
+        for obj, address in d.counts:
+            wanted[obj].add(address)
+    table: dict[tuple[str, int], Ops] = {}
+    for obj, addresses in wanted.items():
+        if not Path(obj).is_file():
+            continue
+        for a, (mnemonic, operands) in disassemble(obj, addresses).items():
+            table[(obj, a)] = instruction_ops(mnemonic, operands)
+    unread = 0
+    out = []
+    for d in dumps:
+        flops = scalar = divide = 0
+        for key, n in d.counts.items():
+            ops = table.get(key)
+            if ops is None:
+                unread += n
+                continue
+            flops += n * ops.flops
+            scalar += n * ops.flops * ops.scalar
+            divide += n * ops.divide
+        out.append({"instructions": d.total, "flops": flops, "scalar_flops": scalar, "div_sqrt": divide})
+    return out, unread
+
+
+def missing_tools() -> list[str]:
+    """The tools counting needs that are not on PATH."""
+    return [tool for tool in ("valgrind", "objdump") if shutil.which(tool) is None]
+
+
+def count_ops(resolution: int, method: str, precision: str, warm_up: int = 3, steps: int = 3) -> dict:
+    """Instructions and floating-point operations per particle-step of each stage of the 2D dam break
+    (``augmpm.bench.dam_break_scene``) at ``resolution``, one thread, over ``steps`` steps after
+    ``warm_up``: the stages of the engine's stage times, and the whole step (``step``, the work after the
+    last stage included). Takes about half a minute at 256² (valgrind runs ~50× slower)."""
+    if missing := missing_tools():
+        raise OpCountError(f"counting operations needs {' and '.join(missing)} on PATH")
+    with tempfile.TemporaryDirectory(prefix="augmpm-ops-") as tmp:
+        out = Path(tmp) / "callgrind.out"
+        info = Path(tmp) / "info.json"
+        cmd = [
+            "valgrind",
+            "--tool=callgrind",
+            "--dump-instr=yes",
+            "--collect-atstart=no",
+            f"--toggle-collect={STEP_FUNCTION}",
+            f"--dump-before={LAP_FUNCTION}",
+            f"--callgrind-out-file={out}",
+            sys.executable,
+            "-m",
+            "augmpm.opcount",
+            str(resolution),
+            method,
+            precision,
+            str(warm_up),
+            str(steps),
+            str(info),
+        ]
+        run = subprocess.run(cmd, capture_output=True, text=True)
+        if run.returncode != 0:
+            raise OpCountError(f"valgrind exited with {run.returncode}: {run.stderr.strip()[-2000:]}")
+        meta = json.loads(info.read_text())
+        files = sorted(Path(tmp).glob("callgrind.out.*"), key=lambda p: int(p.suffix[1:]))
+        dumps = [parse_dump(p.read_text()) for p in files]
+    # A dump before the timer's call at the end of stage k holds that stage: the step's first also holds
+    # the work after the last stage of the step before (its checks and bookkeeping).
+    names = meta["stages"]
+    per_step = len(names)
+    if len(dumps) != per_step * (warm_up + steps):
+        raise OpCountError(
+            f"callgrind wrote {len(dumps)} dumps, not {per_step} a step for {warm_up + steps} steps: "
+            + "did the step's stages change (Lap::add_to)?"
+        )
+    counted = dumps[-per_step * steps :]
+    for d in counted:
+        if not d.trigger.endswith("Lap::add_to"):
+            raise OpCountError(f"a dump triggered by {d.trigger!r}, not the stage timer")
+    weighed, unread = weigh(counted)
+    particle_steps = meta["particles"] * steps
+    stages: dict[str, dict[str, float]] = {name: defaultdict(float) for name in names}
+    for i, w in enumerate(weighed):
+        for k, v in w.items():
+            stages[names[i % per_step]][k] += v / particle_steps
+    stages["step"] = {k: sum(s[k] for s in stages.values()) for k in weighed[0]}
+    total = stages["step"]["instructions"] * particle_steps
+    return {
+        "case": f"dam_break_{resolution}",
+        "method": method,
+        "precision": precision,
+        "particles": meta["particles"],
+        "warm_up": warm_up,
+        "steps": steps,
+        "stages": {k: dict(v) for k, v in stages.items()},
+        "unread_share": unread / total if total else 0.0,
+    }
+
+
+def _main_worker(argv: list[str]) -> None:
+    """Run under callgrind by :func:`count_ops`: steps the dam break and writes what the counts are of."""
+    from augmpm import _core
+    from augmpm.bench import dam_break_scene
+    from augmpm.simulation import memory_limit
+
+    resolution, method, precision, warm_up, steps, info = argv
+    scene = dam_break_scene(int(resolution)).model_copy(update={"precision": precision})
+    sim = _core.Simulation(scene.to_json(), method, 1, memory_limit())
+    Path(info).write_text(json.dumps({"particles": sim.num_particles, "stages": list(sim.stage_times())}))
+    sim.step(int(warm_up))
+    sim.step(int(steps))
+
+
+if __name__ == "__main__":
+    _main_worker(sys.argv[1:])
