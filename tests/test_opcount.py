@@ -98,6 +98,15 @@ def test_parse_dump_reads_compressed_names_and_positions_and_leaves_out_calls():
     }
 
 
+def test_parse_dump_keeps_object_names_across_the_dumps_of_a_run():
+    """An object named in an earlier dump of the run is known by its id alone in a later one."""
+    objects: dict[str, str] = {}
+    parse_dump(_DUMP, objects)
+    later = "positions: instr line\nevents: Ir\nob=(7)\nfn=(11)\n0x2000 0 4\ntotals: 4\n"
+    assert parse_dump(later, objects).counts == {("/tmp/core.so", 0x2000): 4}
+    assert parse_dump(later).counts == {("???", 0x2000): 4}, "unknown without the run's names"
+
+
 def test_parse_dump_rejects_what_it_cannot_read():
     with pytest.raises(OpCountError, match="add up to 117, its totals say 118"):
         parse_dump(_DUMP.replace("totals: 117", "totals: 118"))

@@ -81,10 +81,12 @@ def _position(token: str, last: int) -> int:
     return int(token, 0)
 
 
-def parse_dump(text: str) -> Dump:
+def parse_dump(text: str, objects: dict[str, str] | None = None) -> Dump:
     """A callgrind output file written with ``--dump-instr=yes`` (positions ``instr line``, event ``Ir``),
-    name and position compression included. Checks that the instruction counts add up to its totals."""
-    objects: dict[str, str] = {}
+    name and position compression included. Checks that the instruction counts add up to its totals.
+    ``objects`` holds the object names by id across the dumps of one run, in order (an id keeps its name
+    for the whole run, and a later dump may use it without giving it again)."""
+    objects = {} if objects is None else objects
     trigger, totals, obj = "", None, "???"
     counts: dict[tuple[str, int], int] = defaultdict(int)
     last, skip_next = 0, False
@@ -229,7 +231,8 @@ def count_ops(resolution: int, method: str, precision: str, warm_up: int = 3, st
             raise OpCountError(f"valgrind exited with {run.returncode}: {run.stderr.strip()[-2000:]}")
         meta = json.loads(info.read_text())
         files = sorted(Path(tmp).glob("callgrind.out.*"), key=lambda p: int(p.suffix[1:]))
-        dumps = [parse_dump(p.read_text()) for p in files]
+        objects: dict[str, str] = {}
+        dumps = [parse_dump(p.read_text(), objects) for p in files]
     # A dump before the timer's call at the end of stage k holds that stage: the step's first also holds
     # the work after the last stage of the step before (its checks and bookkeeping).
     names = meta["stages"]
