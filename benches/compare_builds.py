@@ -1,7 +1,7 @@
 """Two builds of the engine in one process, alternated: the honest way to tell a small change from noise.
 
     python benches/compare_builds.py NEW.so OLD.so [--resolution 256] [--dim 2] [--method naive] [--steps 10]
-        [--rounds 60] [--threads 1] [--warm-up 3] [--scene paper/fluid_incline_noslip]
+        [--rounds 60] [--threads 1] [--warm-up 3] [--scene paper/fluid_incline_noslip] [--ops]
 
 Each argument is a built extension (`python/augmpm/_core.abi3.so` of a checkout, or one unpacked from a
 wheel: `maturin build --release`). Both step the same dam break (`augmpm.bench.dam_break_scene`, or
@@ -15,6 +15,11 @@ timings include start-up and scene building; this does not.
 
 The scene is built by the installed `augmpm`: both builds must read its scene format. The same file given
 twice is one library, loaded once: the two then share an engine module (an A/A run).
+
+With `--ops`, each build is also run under valgrind's callgrind (`augmpm.opcount`: 3 steps counted after 3,
+whatever `--warm-up` is, one thread) and its instructions and floating-point operations per particle-step
+are printed per stage with their ratio: exact, where the times are noisy, but fewer instructions need not
+take less time (see README, Performance).
 """
 
 from __future__ import annotations
@@ -27,7 +32,7 @@ import time
 from math import comb
 from pathlib import Path
 
-from augmpm import bench
+from augmpm import bench, opcount
 from augmpm.scene import SceneError, load_scene
 from augmpm.simulation import memory_limit
 
@@ -79,6 +84,11 @@ def main() -> None:
     parser.add_argument(
         "--warm-up", type=int, default=3, help="steps before the rounds (thousands: the particles have mixed)"
     )
+    parser.add_argument(
+        "--ops",
+        action="store_true",
+        help="also count each build's instructions and flops per stage under callgrind (needs valgrind, objdump)",
+    )
     args = parser.parse_args()
     for path in (args.new, args.old):
         if not path.is_file():
@@ -102,6 +112,8 @@ def main() -> None:
         resolution = args.resolution or (256 if dim == 2 else 64)
         scene = (bench.dam_break_scene if dim == 2 else bench.dam_break_3d_scene)(resolution).to_json()
         what = f"{dim}D dam break at {resolution}"
+    if args.ops and (missing := opcount.missing_tools()):
+        parser.error(f"--ops: needs {' and '.join(missing)} on PATH, not found")
     sims = {
         label: load_engine(label, path).Simulation(scene, args.method, args.threads, memory_limit())
         for label, path in (("A", args.new), ("B", args.old))
@@ -136,6 +148,33 @@ def main() -> None:
             f"{stage:9s} {statistics.median(a):7.1f} {statistics.median(b):7.1f}  {spread:28s} "
             f"{min(a) / min(b):11.3f}  {within}"
         )
+    if args.ops:
+        counts = {
+            label: opcount.count_scene_ops(scene, args.method, engine=path)
+            for label, path in (("A", args.new), ("B", args.old))
+        }
+        print()
+        print("\n".join(format_ops(counts["A"], counts["B"])))
+
+
+def format_ops(a: dict, b: dict) -> list[str]:
+    """Per stage, the instructions and flops per particle-step of builds A and B (``opcount.count_scene_ops``)
+    and their ratios A/B; stages that ran no instruction in either are left out."""
+    lines = [
+        f"instructions and flops a particle-step, steps {a['warm_up'] + 1}–{a['warm_up'] + a['steps']} under callgrind",
+        f"{'stage':9s} {'A instr':>9s} {'B instr':>9s} {'A/B':>6s} {'A flops':>9s} {'B flops':>9s} {'A/B':>6s}",
+    ]
+    for stage, x in a["stages"].items():
+        y = b["stages"].get(stage)
+        if y is None or max(x["instructions"], y["instructions"]) < 0.05:
+            continue
+
+        def ratio(p: float, q: float) -> str:
+            return f"{p / q:6.3f}" if q > 0 else "     –"
+
+        (i, j), (f, g) = (x["instructions"], y["instructions"]), (x["flops"], y["flops"])
+        lines.append(f"{stage:9s} {i:9.1f} {j:9.1f} {ratio(i, j)} {f:9.1f} {g:9.1f} {ratio(f, g)}")
+    return lines
 
 
 if __name__ == "__main__":

@@ -159,7 +159,10 @@ def test_count_ops_cuts_the_step_into_its_stages():
     """Counted under callgrind, the 128² naive dam break's stages add up to its step, every instruction is
     read from its object, and P2G does at least its 9 nodes' momentum and mass scatters (an affine product
     and sum, a weighted sum and a mass, 10 flops a node in 2D) and one division or root."""
-    c = opcount.count_ops(128, "naive", "f64", warm_up=1, steps=1)
+    import augmpm
+
+    scene = bench.dam_break_scene(128).to_json()
+    c = opcount.count_scene_ops(scene, "naive", warm_up=1, steps=1, engine=augmpm._core.__file__)
     stages = c["stages"]
     assert list(stages) == ["sort", "density", "boundary", "p2g", "grid", "g2p", "step"]
     parts = sum(s["instructions"] for name, s in stages.items() if name != "step")
@@ -167,3 +170,28 @@ def test_count_ops_cuts_the_step_into_its_stages():
     assert c["unread_share"] < 1e-3
     assert stages["p2g"]["flops"] >= 9 * 10 and stages["p2g"]["div_sqrt"] >= 1
     assert stages["p2g"]["instructions"] > stages["p2g"]["flops"] / 2
+
+
+def test_compare_builds_prints_both_builds_counts_and_their_ratios():
+    """benches/compare_builds.py --ops: per stage, each build's instructions and flops and the ratio A/B; a stage
+    neither ran is left out, and a ratio over nothing is a dash."""
+    import importlib.util
+
+    from .conftest import ROOT
+
+    spec = importlib.util.spec_from_file_location("compare_builds", ROOT / "benches" / "compare_builds.py")
+    compare = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(compare)
+
+    def counts(p2g: float, g2p_flops: float) -> dict:
+        none = {"instructions": 0.0, "flops": 0.0}
+        stages = {"boundary": none, "p2g": {"instructions": p2g, "flops": 200.0}, "g2p": {"instructions": 500.0}}
+        stages["g2p"]["flops"] = g2p_flops
+        return {"warm_up": 3, "steps": 3, "stages": stages}
+
+    lines = compare.format_ops(counts(600.0, 100.0), counts(680.0, 0.0))
+    assert lines[0].endswith("steps 4–6 under callgrind")
+    rows = {line.split()[0]: line.split()[1:] for line in lines[2:]}
+    assert rows.keys() == {"p2g", "g2p"}
+    assert rows["p2g"] == ["600.0", "680.0", "0.882", "200.0", "200.0", "1.000"]
+    assert rows["g2p"][-1] == "–"

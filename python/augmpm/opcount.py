@@ -200,14 +200,30 @@ def missing_tools() -> list[str]:
 
 def count_ops(resolution: int, method: str, precision: str, warm_up: int = 3, steps: int = 3) -> dict:
     """Instructions and floating-point operations per particle-step of each stage of the 2D dam break
-    (``augmpm.bench.dam_break_scene``) at ``resolution``, one thread, over ``steps`` steps after
-    ``warm_up``: the stages of the engine's stage times, and the whole step (``step``, the work after the
-    last stage included). Takes about half a minute at 256² (valgrind runs ~50× slower)."""
+    (``augmpm.bench.dam_break_scene``) at ``resolution`` in ``precision``: :func:`count_scene_ops` with the
+    case and precision named. Takes about half a minute at 256² (valgrind runs ~50× slower)."""
+    from augmpm.bench import dam_break_scene
+
+    scene = dam_break_scene(resolution).model_copy(update={"precision": precision})
+    counted = count_scene_ops(scene.to_json(), method, warm_up, steps)
+    return {"case": f"dam_break_{resolution}", "method": method, "precision": precision, **counted}
+
+
+def count_scene_ops(
+    scene: str, method: str, warm_up: int = 3, steps: int = 3, engine: Path | str | None = None
+) -> dict:
+    """Instructions and floating-point operations per particle-step of each stage of the scene (its JSON)
+    stepped by ``method`` on one thread, over ``steps`` steps after ``warm_up``: the stages of the engine's
+    stage times (the first also holds the work after the last stage of the step before), and the whole
+    step (``step``). ``engine`` is the extension to count (a built ``_core`` file; the installed one by
+    default)."""
     if missing := missing_tools():
         raise OpCountError(f"counting operations needs {' and '.join(missing)} on PATH")
     with tempfile.TemporaryDirectory(prefix="augmpm-ops-") as tmp:
         out = Path(tmp) / "callgrind.out"
         info = Path(tmp) / "info.json"
+        scene_file = Path(tmp) / "scene.json"
+        scene_file.write_text(scene)
         cmd = [
             "valgrind",
             "--tool=callgrind",
@@ -219,12 +235,12 @@ def count_ops(resolution: int, method: str, precision: str, warm_up: int = 3, st
             sys.executable,
             "-m",
             "augmpm.opcount",
-            str(resolution),
+            str(scene_file),
             method,
-            precision,
             str(warm_up),
             str(steps),
             str(info),
+            *([str(Path(engine).resolve())] if engine is not None else []),
         ]
         run = subprocess.run(cmd, capture_output=True, text=True)
         if run.returncode != 0:
@@ -255,9 +271,6 @@ def count_ops(resolution: int, method: str, precision: str, warm_up: int = 3, st
     stages["step"] = {k: sum(s[k] for s in stages.values()) for k in weighed[0]}
     total = stages["step"]["instructions"] * particle_steps
     return {
-        "case": f"dam_break_{resolution}",
-        "method": method,
-        "precision": precision,
         "particles": meta["particles"],
         "warm_up": warm_up,
         "steps": steps,
@@ -267,14 +280,21 @@ def count_ops(resolution: int, method: str, precision: str, warm_up: int = 3, st
 
 
 def _main_worker(argv: list[str]) -> None:
-    """Run under callgrind by :func:`count_ops`: steps the dam break and writes what the counts are of."""
-    from augmpm import _core
-    from augmpm.bench import dam_break_scene
+    """Run under callgrind by :func:`count_scene_ops`: steps the scene and writes what the counts are of."""
+    import importlib.machinery
+    import importlib.util
+
     from augmpm.simulation import memory_limit
 
-    resolution, method, precision, warm_up, steps, info = argv
-    scene = dam_break_scene(int(resolution)).model_copy(update={"precision": precision})
-    sim = _core.Simulation(scene.to_json(), method, 1, memory_limit())
+    scene_file, method, warm_up, steps, info, *engine = argv
+    if engine:
+        loader = importlib.machinery.ExtensionFileLoader("counted._core", engine[0])
+        spec = importlib.util.spec_from_file_location("counted._core", engine[0], loader=loader)
+        core = importlib.util.module_from_spec(spec)
+        loader.exec_module(core)
+    else:
+        from augmpm import _core as core
+    sim = core.Simulation(Path(scene_file).read_text(), method, 1, memory_limit())
     Path(info).write_text(json.dumps({"particles": sim.num_particles, "stages": list(sim.stage_times())}))
     sim.step(int(warm_up))
     sim.step(int(steps))
