@@ -16,18 +16,19 @@ timings include start-up and scene building; this does not.
 The scene is built by the installed `augmpm`: both builds must read its scene format. The same file given
 twice is one library, loaded once: the two then share an engine module (an A/A run).
 
-With `--ops`, each build is also run under valgrind's callgrind (`augmpm.opcount`: 3 steps counted after 3,
-whatever `--warm-up` is, one thread) and its instructions and floating-point operations per particle-step
-are printed per stage with their ratio: exact, where the times are noisy, but fewer instructions need not
-take less time (see README, Performance).
+With `--ops`, each build is also run under valgrind's callgrind (`augmpm.opcount`, one thread) and its
+instructions and floating-point operations per particle-step are printed per stage with their ratio: exact,
+where the times are noisy, but fewer instructions need not take less time (see README, Performance). They
+are counted over the scene's steps 4–6, whatever `--warm-up` is (valgrind runs ~50× slower): a state near
+the start, where the timed rounds may run one long mixed.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib.machinery
-import importlib.util
 import statistics
+import subprocess
+import sys
 import time
 from math import comb
 from pathlib import Path
@@ -35,16 +36,6 @@ from pathlib import Path
 from augmpm import bench, opcount
 from augmpm.scene import SceneError, load_scene
 from augmpm.simulation import memory_limit
-
-
-def load_engine(label: str, path: Path):
-    """The extension module at `path`, imported under its own name (`<label>._core`) beside the others."""
-    name = f"{label}._core"
-    loader = importlib.machinery.ExtensionFileLoader(name, str(path))
-    spec = importlib.util.spec_from_file_location(name, path, loader=loader)
-    module = importlib.util.module_from_spec(spec)
-    loader.exec_module(module)
-    return module
 
 
 def median_interval(values: list[float], confidence: float = 0.95) -> tuple[float, float] | None:
@@ -112,10 +103,13 @@ def main() -> None:
         resolution = args.resolution or (256 if dim == 2 else 64)
         scene = (bench.dam_break_scene if dim == 2 else bench.dam_break_3d_scene)(resolution).to_json()
         what = f"{dim}D dam break at {resolution}"
-    if args.ops and (missing := opcount.missing_tools()):
-        parser.error(f"--ops: needs {' and '.join(missing)} on PATH, not found")
+    if args.ops:
+        try:
+            opcount.require_tools()
+        except opcount.OpCountError as e:
+            parser.error(f"--ops: {e}")
     sims = {
-        label: load_engine(label, path).Simulation(scene, args.method, args.threads, memory_limit())
+        label: opcount.load_extension(label, path).Simulation(scene, args.method, args.threads, memory_limit())
         for label, path in (("A", args.new), ("B", args.old))
     }
     for sim in sims.values():
@@ -149,10 +143,13 @@ def main() -> None:
             f"{min(a) / min(b):11.3f}  {within}"
         )
     if args.ops:
-        counts = {
-            label: opcount.count_scene_ops(scene, args.method, engine=path)
-            for label, path in (("A", args.new), ("B", args.old))
-        }
+        try:
+            counts = {
+                label: opcount.count_scene_ops(scene, args.method, engine=path)
+                for label, path in (("A", args.new), ("B", args.old))
+            }
+        except (opcount.OpCountError, subprocess.CalledProcessError) as e:
+            sys.exit(f"--ops: counting failed: {e}")
         print()
         print("\n".join(format_ops(counts["A"], counts["B"])))
 

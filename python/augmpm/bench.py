@@ -648,7 +648,7 @@ def run_bench(
     instructions and floating-point operations per particle-step, counted under callgrind
     (:mod:`augmpm.opcount`) on the 256² dam break (128² with ``quick``)."""
     from augmpm import _core
-    from augmpm.opcount import count_ops, missing_tools
+    from augmpm.opcount import OpCountError, count_ops, require_tools
     from augmpm.simulation import resolve_threads
 
     fig1 = scene_path(fig1)
@@ -656,24 +656,28 @@ def run_bench(
         raise _core.SceneError(f"--fig1: {fig1} not found (a scene file, or a shipped scene's name)")
     if peers is not None and not (Path(peers) / "run.sh").is_file():
         raise _core.SceneError(f"--peers: {Path(peers) / 'run.sh'} not found (the folder of the peer engines' run.sh)")
-    if ops and (missing := missing_tools()):
-        raise _core.SceneError(f"--ops: counting needs {' and '.join(missing)} on PATH, not found")
+    if ops:
+        try:
+            require_tools()
+        except OpCountError as e:
+            raise _core.SceneError(f"--ops: {e}") from None
     threads = resolve_threads(threads)
     sizes = sizes or ((128, 256) if quick else (128, 256, 512))
     thread_counts = tuple(sorted({1, threads}))
     report = {"machine": _machine(threads), "quick": quick, "rows": []}
     log(f"machine roofs (memory bandwidth, f64 peak) on {threads} threads …")
     report["roofs"] = machine_roofs(threads)
+    if ops:
+        # First: a failure under valgrind then costs no other measurement.
+        res = 128 if quick else 256
+        log(f"operations per particle-step under callgrind, dam break {res}², one thread, 3 steps after 3 …")
+        report["ops"] = [count_ops(res, m, p) for p in PRECISIONS for m in METHODS]
     log(f"fig1 ({fig1}), {2_000 if quick else FIG1_STEPS} steps, naive and augmented …")
     report["rows"] += bench_fig1(fig1, 2_000 if quick else FIG1_STEPS, threads)
     steps = {128: 200, 256: 60, 512: 20} if quick else {128: 1000, 256: 300, 512: 60}
     for res in sizes:
         log(f"dam break {res}², {steps[res]} steps, threads {thread_counts} …")
         report["rows"] += bench_dam_break(res, steps[res], thread_counts)
-    if ops:
-        res = 128 if quick else 256
-        log(f"operations per particle-step under callgrind, dam break {res}², one thread, 3 steps after 3 …")
-        report["ops"] = [count_ops(res, m, p) for p in PRECISIONS for m in METHODS]
     scaling = {256: (10, 50), 512: (3, 20)} if quick else {256: (20, 200), 512: (5, 50)}
     for res in (r for r in sizes if r in scaling and threads > 1):
         chunk, warm_up = scaling[res]
@@ -769,7 +773,8 @@ def format_report(report: dict) -> str:
             label = f"{r['case']} {r.get('precision', 'f64')} {r['method']} {r['threads']}t"
             lines.append(f"| {label} | {cells} |")
         lines.append("")
-        lines += _roofline(report, [r for r in dam if "error" not in r])
+        timed = [r for r in dam if "error" not in r]
+        lines += _roofline(report, timed) + _operations(report, timed)
     moving = [r for r in report["rows"] if r["case"].startswith("moving_")]
     if moving:
         lines += ["| moving walls | method | particles | steps | step time, moving / still walls |"]
@@ -857,8 +862,8 @@ def _roofline(report: dict, rows: list[dict]) -> list[str]:
     lines = [
         f"Roofline: memory bandwidth {roofs['bandwidth_GBps']:.1f} GB/s and f64 peak "
         + f"{roofs['peak_GFLOPs']:.0f} GFLOP/s measured on {roofs['threads']} threads. Per stage: particle "
-        + "bytes per particle-step / GB/s reached (share of the bandwidth). Operations: see below (`--ops`; this "
-        + "machine kind exposes no hardware counters, so they are counted under callgrind).",
+        + "bytes per particle-step / GB/s reached (share of the bandwidth)"
+        + ("; the operations per particle-step are below." if report.get("ops") else "."),
         "",
         "| dam break, config | " + " | ".join(stages) + " |",
         "|---|" + "---|" * len(stages),
@@ -876,27 +881,35 @@ def _roofline(report: dict, rows: list[dict]) -> list[str]:
         label = f"{r['case']} {r['precision']} {r['method']} {r['threads']}t"
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     lines.append("")
-    return lines + _operations(report, rows)
+    return lines
 
 
 def _operations(report: dict, rows: list[dict]) -> list[str]:
     """The operations table (``--ops``): per counted configuration and stage, the instructions, floating-point
-    operations (those in scalar instructions) and divisions and square roots per particle-step, and the
-    rates they make at each timed row's stage time: instructions and operations per second, the latter's
-    share of the machine's f64 peak."""
+    operations (those in scalar instructions) and division and square-root instructions per particle-step,
+    and the rates those counts make at each timed row's stage time (the step's: the sum of its stage times):
+    instructions and operations per second, the latter's share of the machine's f64 peak (measured on the
+    report's threads)."""
     counted = report.get("ops")
     if not counted:
         return []
-    peak = report.get("roofs", {}).get("peak_GFLOPs")
+    roofs = report.get("roofs") or {}
+    peak = roofs.get("peak_GFLOPs")
     first = counted[0]
     lines = [
         f"Operations per particle-step, counted under callgrind on one thread (steps {first['warm_up'] + 1}–"
         + f"{first['warm_up'] + first['steps']} of the dam break; `--ops`): flops are adds, subtracts, multiplies, "
-        + "divisions and square roots, one a lane, and fused multiply-adds, two a lane; of them, those in scalar "
-        + "(one-lane) instructions. The rates are those counts at each timed row's stage time"
-        + (f"; the flop rate's share of the f64 peak ({peak:.0f} GFLOP/s)." if peak else "."),
+        + "divisions and square roots, one a lane, and fused multiply-adds, two a lane, every lane of a packed "
+        + "instruction counted; of them, those in scalar (one-lane) instructions. The rates are those counts at "
+        + "each timed row's stage time"
+        + (
+            f"; the flop rate's share of the f64 peak ({peak:.0f} GFLOP/s on {roofs['threads']} threads)."
+            if peak
+            else "."
+        ),
         "",
-        "| dam break, config | stage | instructions | flops (scalar) | divisions, roots | G instructions/s | GFLOP/s |",
+        "| dam break, config | stage | instructions | flops (scalar) | division, root instructions "
+        + "| G instructions/s | GFLOP/s |",
         "|---|---|---|---|---|---|---|",
     ]
     for c in counted:

@@ -89,7 +89,7 @@ def _parser() -> argparse.ArgumentParser:
         "--ops",
         action="store_true",
         help="also count each stage's instructions and floating-point operations per particle-step under "
-        + "valgrind's callgrind (needs valgrind and objdump; ~3 minutes more)",
+        + "valgrind's callgrind (needs valgrind and objdump; ~2–3 minutes more)",
     )
 
     w = sub.add_parser("sweep", help="run a scene over a grid and/or random samples of its keys, on Dask")

@@ -389,7 +389,7 @@ impl Lap {
 
     /// Never inlined: the step calls it once at the end of each stage, so that a tool can cut the step
     /// into the same stages as these times (`augmpm bench --ops` counts each stage's operations with
-    /// callgrind, dumping at each return from here).
+    /// callgrind, dumping before each call here; the timer's own work falls in the next stage).
     #[inline(never)]
     fn add_to(&mut self, total: &mut f64) {
         let now = Instant::now();
@@ -737,11 +737,14 @@ where
         Ok(())
     }
 
-    /// One step, the stages in order (the timing of each goes to `times`).
+    /// One step, the stages in order (the timing of each goes to `times`). Never inlined: `augmpm bench
+    /// --ops` counts under callgrind only inside this function.
+    #[inline(never)]
     fn step_here(&mut self) -> Result<(), StepError> {
         let Self { model, state, scratch, times, .. } = self;
         let step = state.step + 1;
         let dt = model.dt;
+        // One lap a stage, in the order of `StageTimes`' fields (`augmpm bench --ops` reads them so).
         let mut lap = Lap::start();
 
         // Moving walls are where they are at the start of the step (the end of the last one): the grid
