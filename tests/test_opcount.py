@@ -30,6 +30,8 @@ from augmpm.opcount import OpCountError, Ops, instruction_ops, parse_dump
         # x87.
         ("faddp", "%st,%st(1)", Ops(1, True, False)),
         ("fsqrt", "", Ops(1, True, True)),
+        ("faddl", "0x8(%rax)", Ops(1, True, False)),
+        ("fdivrp", "%st,%st(1)", Ops(1, True, True)),
         # Integer, logic, comparisons, minima and conversions are no floating-point operations.
         ("add", "$0x8,%rsp", Ops()),
         ("paddd", "%xmm1,%xmm0", Ops()),

@@ -34,7 +34,8 @@ LAP_FUNCTION = "*::simulation::Lap::add_to"
 _ARITHMETIC = re.compile(r"^v?(?:add|sub|mul|div|sqrt|addsub)(ss|sd|ps|pd)$")
 _HORIZONTAL = re.compile(r"^v?h(?:add|sub)(ps|pd)$")
 _FUSED = re.compile(r"^v?f(?:n?m(?:add|sub)|maddsub|msubadd)(?:132|213|231)(ss|sd|ps|pd)$")
-_X87 = re.compile(r"^f(?:add|sub|subr|mul|div|divr)p?$|^fsqrt$")
+# x87, with objdump's size suffixes on memory operands (`faddl`: a double).
+_X87 = re.compile(r"^f(?:add|sub|subr|mul|div|divr)[psl]?$|^fsqrt$")
 # An object named by id: `(id) name` where it is first given, `(id)` after.
 _NAMED = re.compile(r"\((\d+)\)(?: (.*))?$")
 
@@ -178,8 +179,8 @@ def disassemble(path: str, addresses: set[int]) -> dict[int, tuple[str, str]]:
 
 
 def weigh(dumps: list[Dump]) -> tuple[list[dict], int]:
-    """Per dump: instructions, floating-point operations, those in scalar instructions, and divisions and
-    square roots; and the instructions that could not be read from their object's disassembly (objects
+    """Per dump: instructions, floating-point operations, those in scalar instructions, and division and
+    square-root instructions; and the instructions that could not be read from their object's disassembly (objects
     outside the file system, such as the vDSO), which count no operations."""
     wanted: dict[str, set[int]] = defaultdict(set)
     for d in dumps:
