@@ -63,21 +63,21 @@ def instruction_ops(mnemonic: str, operands: str = "") -> Ops:
     multiply, divide or square root; the lanes from the widest register among the operands (xmm 128 bits,
     ymm 256, zmm 512; an AVX-512 mask is not read)."""
     if m := _ARITHMETIC.match(mnemonic):
-        kind, per_lane = m.group(1), 1.0
+        kind, per_lane = m.group(1), 1
     elif m := _FUSED.match(mnemonic):
-        kind, per_lane = m.group(1), 2.0
+        kind, per_lane = m.group(1), 2
     elif m := _HORIZONTAL.match(mnemonic):
-        kind, per_lane = m.group(1), 1.0
+        kind, per_lane = m.group(1), 1
     elif _X87.match(mnemonic):
         return Ops(1, True, mnemonic.startswith(("fdiv", "fsqrt")))
     else:
         return Ops()
     divide = mnemonic.lstrip("v").startswith(("div", "sqrt"))
     if kind in ("ss", "sd"):
-        return Ops(int(per_lane), True, divide)
+        return Ops(per_lane, True, divide)
     width = 512 if "%zmm" in operands else 256 if "%ymm" in operands else 128
     lanes = width // (32 if kind == "ps" else 64)
-    return Ops(int(per_lane * lanes), False, divide)
+    return Ops(per_lane * lanes, False, divide)
 
 
 @dataclass
