@@ -61,21 +61,54 @@ impl<const D: usize> Stencil<D> {
         self.visit(h, strides, |_, i, w, d| f(origin + i, w, d));
     }
 
+    /// The components of `x_i − x_p` (m) along each axis: `[k][j] = (j − fx_k) h` for the nodes whose
+    /// offset along axis k is j.
+    #[inline(always)]
+    pub fn axis_offsets(&self, h: Real) -> [[Real; 3]; D] {
+        std::array::from_fn(|k| std::array::from_fn(|j| (j as Real - self.fx[k]) * h))
+    }
+
+    /// Calls `f(offset, i − origin, w_rest)` for every row of three nodes along the first axis, in the order
+    /// of [`Stencil::visit`]: `offset` is the row's first node (`offset[0] = 0`), and `w_rest` the product of
+    /// the other axes' weights, `w₁` in 2D and `w₁·w₂` in 3D. The row's node `a` has the index
+    /// `i + a·strides[0]` and the weight `w₀[a]·w_rest`, as [`Stencil::visit`] forms it.
+    ///
+    /// G2P gathers a 3D particle away from walls by rows: a row's sum is formed once, and what depends only
+    /// on the other axes' offsets is taken once a row instead of once a node.
+    #[inline(always)]
+    pub fn for_each_row(&self, strides: &[usize; D], mut f: impl FnMut([usize; D], usize, Real)) {
+        match D {
+            2 => {
+                for b in 0..3 {
+                    let mut o = [0; D];
+                    o[1] = b;
+                    f(o, b * strides[1], self.w[1][b]);
+                }
+            }
+            3 => {
+                for c in 0..3 {
+                    for b in 0..3 {
+                        let mut o = [0; D];
+                        (o[1], o[2]) = (b, c);
+                        f(o, b * strides[1] + c * strides[2], self.w[1][b] * self.w[2][c]);
+                    }
+                }
+            }
+            _ => unreachable!("the transfers run in 2D and 3D"),
+        }
+    }
+
     /// Calls `f(offset, i − origin, weight, x_i − x_p)` for every node of the stencil, in the order of
     /// [`Stencil::for_each`]: nested per axis in 2D and 3D, a row of three nodes along the first axis
-    /// innermost, with the other axes' weights, offsets and index read once a row. The weight is the
-    /// product `((1·w₀)·w₁)·w₂` in that order (`1·w₀ = w₀` exactly), formed at each node.
+    /// innermost, with the other axes' weights, offsets and index read once a row. The weight is
+    /// `w₀·(w₁·w₂)`, the other axes' product formed once a row (`w₀·w₁` in 2D; in any other dimension the
+    /// product in axis order, `1·w₀ = w₀` exactly).
     ///
     /// Every offset component is 0, 1 or 2, so `i − origin ≤ Σ_k 2 strides_k`: the transfers check that
     /// last node once and index the others unchecked, relying on this bound.
     #[inline(always)]
     pub fn visit(&self, h: Real, strides: &[usize; D], mut f: impl FnMut([usize; D], usize, Real, Vector<D>)) {
-        let mut dk = [[0.0; 3]; D];
-        for a in 0..D {
-            for (j, d) in dk[a].iter_mut().enumerate() {
-                *d = (j as Real - self.fx[a]) * h;
-            }
-        }
+        let dk = self.axis_offsets(h);
         match D {
             2 => {
                 for b in 0..3 {
@@ -94,14 +127,14 @@ impl<const D: usize> Stencil<D> {
                 for c in 0..3 {
                     let (wc, plane) = (self.w[2][c], c * strides[2]);
                     for b in 0..3 {
-                        let (wb, row) = (self.w[1][b], b * strides[1] + plane);
+                        let (wbc, row) = (self.w[1][b] * wc, b * strides[1] + plane);
                         let mut dpos = Vector::<D>::zeros();
                         (dpos[1], dpos[2]) = (dk[1][b], dk[2][c]);
                         for a in 0..3 {
                             let mut o = [0; D];
                             (o[0], o[1], o[2]) = (a, b, c);
                             dpos[0] = dk[0][a];
-                            f(o, row + a * strides[0], self.w[0][a] * wb * wc, dpos);
+                            f(o, row + a * strides[0], self.w[0][a] * wbc, dpos);
                         }
                     }
                 }
@@ -270,8 +303,8 @@ mod tests {
     use nalgebra::Vector2;
 
     /// The stencil visits its 3^D nodes in the order of `stencil_offset` (first axis fastest), each with
-    /// the weight `Π_k w_k` multiplied in axis order, `x_i − x_p`, and its index from the strides: the
-    /// sums of every transfer are taken in that order, so it is part of the bitwise results.
+    /// the weight `w₀ · Π_{k≥1} w_k` (the other axes' product in axis order), `x_i − x_p`, and its index from
+    /// the strides: the sums of every transfer are taken in that order, so it is part of the bitwise results.
     #[test]
     fn the_stencil_visits_nodes_in_offset_order() {
         fn check<const D: usize>(x: Vector<D>) {
@@ -280,13 +313,38 @@ mod tests {
             let mut k = 0;
             s.for_each_index(h, 5, &strides, |i, w, d| {
                 let o = stencil_offset::<D>(k);
-                let weight = (0..D).fold(1.0, |acc, a| acc * s.w[a][o[a]]);
+                let weight = s.w[0][o[0]] * (1..D).fold(1.0, |acc, a| acc * s.w[a][o[a]]);
                 assert_eq!(w.to_bits(), weight.to_bits());
                 assert_eq!(i, 5 + (0..D).map(|a| o[a] * strides[a]).sum::<usize>());
                 assert_eq!(d, Vector::<D>::from_fn(|a, _| (o[a] as Real - s.fx[a]) * h));
                 k += 1;
             });
             assert_eq!(k, stencil_len(D));
+        }
+        check(Vector::<2>::new(0.337, 0.912));
+        check(Vector::<3>::new(0.337, 0.912, 0.5501));
+    }
+
+    /// The rows of `for_each_row`, expanded node by node (`i + a·strides[0]`, weight `w₀[a]·w_rest`), are the
+    /// nodes `visit` gives, in its order, with the same bits: the transfers that walk rows sum what the others
+    /// sum node by node.
+    #[test]
+    fn rows_expand_to_the_visited_nodes() {
+        fn check<const D: usize>(x: Vector<D>) {
+            let (h, strides) = (0.1, std::array::from_fn::<usize, D, _>(|k| 1 + 7 * k * k));
+            let s = Stencil::new(&x, 1.0 / h);
+            let mut nodes = Vec::new();
+            s.visit(h, &strides, |o, i, w, _| nodes.push((o, i, w.to_bits())));
+            let mut rows = Vec::new();
+            s.for_each_row(&strides, |o, i, w_rest| {
+                assert_eq!(o[0], 0);
+                for a in 0..3 {
+                    let mut oa = o;
+                    oa[0] = a;
+                    rows.push((oa, i + a * strides[0], (s.w[0][a] * w_rest).to_bits()));
+                }
+            });
+            assert_eq!(rows, nodes);
         }
         check(Vector::<2>::new(0.337, 0.912));
         check(Vector::<3>::new(0.337, 0.912, 0.5501));

@@ -339,7 +339,8 @@ pub fn p2g<const D: usize>(
             unsafe { density_out.update(p, |d| *d = rho_p) };
             if let Some(volumes) = volumes {
                 // J is smoothed over the regular grid, near walls too: one loop for every particle, as
-                // fast as the same sums fused into the momentum's loop (measured).
+                // fast as the same sums fused into the momentum's loop (measured; in 3D, with the momentum
+                // scattered by rows, the fused loop took 1.04× the time).
                 // SAFETY: exclusive as stated above.
                 unsafe { out.scatter_volume(layout, &s, origin, volumes) };
             }
@@ -646,16 +647,22 @@ where
             match t.augmented.and_then(|(g, table)| table.entry(p).map(|e| (g, e))) {
                 None => {
                     let (s, origin) = stencil(layout, xp, inv_h);
-                    assert!(last_node(layout, origin) < velocity.len());
-                    s.for_each_index(h, origin, layout.strides(), |i, w, d| {
-                        // SAFETY: i ≤ the stencil's last node, in bounds (checked above).
-                        let vi = unsafe { velocity.get_unchecked(i) } * w;
-                        vn += vi;
-                        cn += vi * d.transpose();
-                    });
-                    cn *= apic;
-                    if smooths {
-                        jbar = volume_ratio_at(layout, &s, origin, volume_ratio);
+                    if D == 3 {
+                        let ratio = smooths.then_some(&volume_ratio.nodes[..]);
+                        (vn, cn, jbar) = regular_gather_by_rows(layout, &s, origin, velocity, ratio);
+                        cn *= apic;
+                    } else {
+                        assert!(last_node(layout, origin) < velocity.len());
+                        s.for_each_index(h, origin, layout.strides(), |i, w, d| {
+                            // SAFETY: i ≤ the stencil's last node, in bounds (checked above).
+                            let vi = unsafe { velocity.get_unchecked(i) } * w;
+                            vn += vi;
+                            cn += vi * d.transpose();
+                        });
+                        cn *= apic;
+                        if smooths {
+                            jbar = volume_ratio_at(layout, &s, origin, volume_ratio);
+                        }
                     }
                 }
                 Some((g, entry @ WallEntry { minv, near, tilt, slot, .. })) => {
@@ -765,6 +772,53 @@ where
     }
 }
 
+/// What G2P gathers for a particle away from walls, row by row (3D): its velocity `Σ_i w v_i`, the sum
+/// `B = Σ_i w v_i d_iᵀ` (`d_i = x_i − x_p`; the caller scales it to `C`), and, with the nodes' volume ratios
+/// `ratio`, its J-bar average `Σ_i w J_i` (0 without).
+///
+/// `B` is formed by columns: column k is `Σ_j d_k[j] u_k[j]`, with `u_k[j]` the sum of `w v_i` over the
+/// nodes whose offset along axis k is j (`Stencil::axis_offsets`). A node adds to the first axis' three
+/// sums and to its row's sum, which goes to the other axes' sums once a row: 10 operations a node instead of
+/// the outer product's 26. Equal to the per-node sums to rounding, not bitwise. 3D dam break at 64³, one
+/// thread, against the per-node loop and a separate J-bar loop: G2P 0.79× its time (see README,
+/// Performance). In 2D, where the outer product is 8 of a node's 13 operations, the row form was no
+/// faster (G2P 0.99×), and the per-node loop stays.
+#[inline(always)]
+fn regular_gather_by_rows<const D: usize>(
+    layout: &GridLayout<D>,
+    s: &Stencil<D>,
+    origin: usize,
+    velocity: &[Vector<D>],
+    ratio: Option<&[(Real, Real)]>,
+) -> (Vector<D>, Matrix<D>, Real) {
+    let last = last_node(layout, origin);
+    assert!(last < velocity.len() && ratio.is_none_or(|r| last < r.len()));
+    let (mut vn, mut moments, mut jbar) = (Vector::<D>::zeros(), [Vector::<D>::zeros(); D], 0.0);
+    let stride = layout.strides()[0];
+    s.for_each_row(layout.strides(), |o, row, w_rest| {
+        let u: [Vector<D>; 3] = std::array::from_fn(|a| {
+            let (i, w) = (origin + row + a * stride, s.w[0][a] * w_rest);
+            if let Some(r) = ratio {
+                // SAFETY: i ≤ the stencil's last node (`Stencil::for_each_row`), in bounds (checked above).
+                jbar += w * unsafe { r.get_unchecked(i) }.1;
+            }
+            // SAFETY: as above.
+            unsafe { velocity.get_unchecked(i) * w }
+        });
+        let across = u[0] + u[1] + u[2];
+        moments[0] += u[1] + u[2] + u[2];
+        for k in 1..D {
+            moments[k] += across * o[k] as Real;
+        }
+        vn += across;
+    });
+    let mut b = Matrix::<D>::zeros();
+    for (k, m) in moments.iter().enumerate() {
+        b.set_column(k, &((m - vn * s.fx[k]) * layout.h));
+    }
+    (vn, b, jbar)
+}
+
 /// Whether the particles hold F for each of them where a material keeps one (otherwise they read F = I).
 fn keeps_f_for_all<const D: usize>(particles: &Particles<D>, materials: &[Material]) -> bool
 where
@@ -837,6 +891,42 @@ mod tests {
 
     /// With no walls and no stress, P2G → G2P conserves mass, linear and angular momentum to
     /// round-off (relative 1e-12: a few hundred additions of O(1) terms in double precision).
+    /// The gather by rows is the per-node gather regrouped: the velocity, `Σ w v dᵀ` and the J-bar average of
+    /// particles anywhere in a cell agree with the per-node sums to rounding (relative 1e-13 of the sums'
+    /// scale, ~500 ulp, in 2D and 3D), and without volume ratios the average is 0.
+    #[test]
+    fn the_gather_by_rows_regroups_the_per_node_sums() {
+        fn check<const D: usize>() {
+            let layout = GridLayout::<D>::new(0.1, [6; D]);
+            let mut s = 99u64;
+            let mut rnd = || {
+                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                (s >> 11) as f64 / (1u64 << 53) as f64
+            };
+            let n = layout.num_nodes();
+            let velocity: Vec<Vector<D>> = (0..n).map(|_| Vector::<D>::from_fn(|_, _| rnd() - 0.5)).collect();
+            let ratio: Vec<(Real, Real)> = (0..n).map(|_| (1.0, 0.8 + 0.4 * rnd())).collect();
+            for _ in 0..200 {
+                let x = Vector::<D>::from_fn(|_, _| 0.15 + 0.3 * rnd());
+                let (st, origin) = stencil(&layout, &x, 1.0 / layout.h);
+                let (mut v, mut b, mut j) = (Vector::<D>::zeros(), Matrix::<D>::zeros(), 0.0);
+                st.for_each_index(layout.h, origin, layout.strides(), |i, w, d| {
+                    v += velocity[i] * w;
+                    b += velocity[i] * w * d.transpose();
+                    j += w * ratio[i].1;
+                });
+                let (vr, br, jr) = regular_gather_by_rows(&layout, &st, origin, &velocity, Some(&ratio));
+                assert!((vr - v).amax() < 1e-13, "velocity {vr} against {v}");
+                // B's scale is |v| h: 0.5 × 0.1 m.
+                assert!((br - b).amax() < 1e-13 * 0.05, "B {br} against {b}");
+                assert!((jr - j).abs() < 1e-13, "J-bar {jr} against {j}");
+                assert_eq!(regular_gather_by_rows(&layout, &st, origin, &velocity, None).2, 0.0);
+            }
+        }
+        check::<2>();
+        check::<3>();
+    }
+
     #[test]
     fn transfers_conserve_mass_and_momentum() {
         let h = 0.05;
