@@ -165,6 +165,32 @@ def test_3d_dam_break_sizes_bench_and_report():
         assert r["augmented_over_naive"] > 0 and r["memory"]["peak_bytes_per_particle"] > 100
     text = bench.format_report({"machine": bench._machine(1), "quick": True, "rows": rows})
     assert "| 32³ | " in text and "dam_break_3d_32 f32 augmented 1t" in text
+    assert "3D target" not in text and not any("target_particle_steps_per_s" in r for r in rows)
+
+
+def test_3d_target_is_reported_for_the_1m_particle_f32_row():
+    """Issue 16's 3D target (≥ 8 M particle-steps/s, the 128³ fluid, naive f32, 2 threads) is read from that row
+    alone, and the report says whether it is met and by how much it is missed."""
+    row = {
+        "case": "dam_break_3d_128",
+        "dim": 3,
+        "particles": 976_241,
+        "precision": "f32",
+        "method": "naive",
+        "threads": 2,
+        "particle_steps_per_s": 6.4e6,
+        "augmented_over_naive": 1.0,
+        "target_particle_steps_per_s": bench.TARGET_3D_RATE,
+        "memory": {"peak_bytes_per_particle": 195.0, "per_particle_without_grid": 88.0},
+        "stages_s": dict.fromkeys(bench.STAGES, 1.0),
+    }
+    text = bench.format_report({"machine": bench._machine(2), "quick": False, "rows": [row]})
+    assert "3D target: the 128³ dam break (976,241 particles), f32 naive on 2 threads, 6.4 M" in text
+    assert "against ≥ 8 M: missed by 1.25×." in text
+    text = bench.format_report(
+        {"machine": bench._machine(2), "quick": False, "rows": [row | {"particle_steps_per_s": 8.1e6}]}
+    )
+    assert "8.1 M particle-steps/s against ≥ 8 M: met." in text
 
 
 def _fake_peers(tmp_path, body: str):
