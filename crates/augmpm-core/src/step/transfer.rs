@@ -776,13 +776,14 @@ where
 /// `B = Σ_i w v_i d_iᵀ` (`d_i = x_i − x_p`; the caller scales it to `C`), and, with the nodes' volume ratios
 /// `ratio`, its J-bar average `Σ_i w J_i` (0 without).
 ///
-/// `B` is formed by columns: column k is `Σ_j d_k[j] u_k[j]`, with `u_k[j]` the sum of `w v_i` over the
-/// nodes whose offset along axis k is j (`Stencil::axis_offsets`). A node adds to the first axis' three
-/// sums and to its row's sum, which goes to the other axes' sums once a row: 10 operations a node instead of
-/// the outer product's 26. Equal to the per-node sums to rounding, not bitwise. 3D dam break at 64³, one
-/// thread, against the per-node loop and a separate J-bar loop: G2P 0.79× its time (see README,
-/// Performance). In 2D, where the outer product is 8 of a node's 13 operations, the row form was no
-/// faster (G2P 0.99×), and the per-node loop stays.
+/// `B` is formed from first moments: with `d_k = (o_k − fx_k) h` (`o` the node's offset in cells, `fx` the
+/// particle's position in the stencil), column k is `h (m_k − fx_k v)`, `m_k = Σ_i o_k w v_i`. A node adds
+/// `w v_i` to its row's sum; a row adds its sum to the velocity, and its nodes' first-axis moment and its
+/// sum times its other offsets to the moments: about 10 operations a node where the outer product took 26.
+/// Equal to the per-node sums to rounding, not bitwise: `m_k` and `fx_k v` are of the size of the velocities,
+/// so B's rounding error is of the per-node sums' order, ε |v| h. 3D dam break at 64³, f64, one thread, against the per-node loop
+/// and a separate J-bar loop: G2P 0.748× its time (see README, Performance). In 2D, where the outer product
+/// is 8 of a node's 13 operations, the row form was no faster (G2P 1.007×), and the per-node loop stays.
 #[inline(always)]
 fn regular_gather_by_rows<const D: usize>(
     layout: &GridLayout<D>,
