@@ -71,7 +71,8 @@ impl<const D: usize> Stencil<D> {
     /// Calls `f(offset, i − origin, w_rest)` for every row of three nodes along the first axis, in the order
     /// of [`Stencil::visit`]: `offset` is the row's first node (`offset[0] = 0`), and `w_rest` the product of
     /// the other axes' weights, `w₁` in 2D and `w₁·w₂` in 3D. The row's node `a` has the index
-    /// `i + a·strides[0]` and the weight `w₀[a]·w_rest`, as [`Stencil::visit`] forms it.
+    /// `i + a·strides[0]` and the weight `w₀[a]·w_rest`, as [`Stencil::visit`] forms it; as there,
+    /// `i + a·strides[0] ≤ Σ_k 2 strides_k`, the stencil's last node.
     ///
     /// G2P gathers a 3D particle away from walls by rows: a row's sum is formed once, and what depends only
     /// on the other axes' offsets is taken once a row instead of once a node.
@@ -304,7 +305,8 @@ mod tests {
 
     /// The stencil visits its 3^D nodes in the order of `stencil_offset` (first axis fastest), each with
     /// the weight `w₀ · Π_{k≥1} w_k` (the other axes' product in axis order), `x_i − x_p`, and its index from
-    /// the strides: the sums of every transfer are taken in that order, so it is part of the bitwise results.
+    /// the strides: the transfers visit nodes in that order (3D G2P away from walls sums by rows), so it is
+    /// part of the bitwise results.
     #[test]
     fn the_stencil_visits_nodes_in_offset_order() {
         fn check<const D: usize>(x: Vector<D>) {

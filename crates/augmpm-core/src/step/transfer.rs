@@ -339,8 +339,8 @@ pub fn p2g<const D: usize>(
             unsafe { density_out.update(p, |d| *d = rho_p) };
             if let Some(volumes) = volumes {
                 // J is smoothed over the regular grid, near walls too: one loop for every particle, as
-                // fast as the same sums fused into the momentum's loop (measured; in 3D, with the momentum
-                // scattered by rows, the fused loop took 1.04× the time).
+                // fast as the same sums fused into the momentum's loop (measured; in 3D a fused loop, with
+                // the momentum scattered by rows, took 1.04× the time: not kept).
                 // SAFETY: exclusive as stated above.
                 unsafe { out.scatter_volume(layout, &s, origin, volumes) };
             }
@@ -602,8 +602,9 @@ impl G2pSum {
 /// "stable"`) or the hold of particles past a wall ([`hold_at_wall`], `"paper"`), advection
 /// `x += dt v`, and the deformation update of its material. A material that smooths its J advances the
 /// J-bar average `Σ_i w_ip J_i` of the nodes' J (`volume_ratio` after [`VolumeRatio::finish`]; empty when
-/// no material smooths), gathered here after the velocity, in a loop of its own (in the velocity's loop
-/// G2P took 1.1× as long, measured).
+/// no material smooths), gathered here: in 2D after the velocity, in a loop of its own (in the velocity's
+/// loop G2P took 1.1× as long, measured); in 3D, away from walls, in the velocity's walk by rows
+/// ([`regular_gather_by_rows`]).
 /// The impulse each wall gave a particle of the wall table there by the wall fit (or the hold),
 /// `m_p Δv_p` (N·s), goes to `pushes`, one per entry of the table in its order.
 #[allow(clippy::too_many_arguments)]
@@ -779,7 +780,8 @@ where
 /// `B` is formed from first moments: with `d_k = (o_k − fx_k) h` (`o` the node's offset in cells, `fx` the
 /// particle's position in the stencil), column k is `h (m_k − fx_k v)`, `m_k = Σ_i o_k w v_i`. A node adds
 /// `w v_i` to its row's sum; a row adds its sum to the velocity, and its nodes' first-axis moment and its
-/// sum times its other offsets to the moments: about 10 operations a node where the outer product took 26.
+/// sum times its other offsets to the moments: about 14 operations a node (the weight and `w v_i` included)
+/// where the per-node sums took 26.
 /// Equal to the per-node sums to rounding, not bitwise: `m_k` and `fx_k v` are of the size of the velocities,
 /// so B's rounding error is of the per-node sums' order, ε |v| h. 3D dam break at 64³, f64, one thread, against the per-node loop
 /// and a separate J-bar loop: G2P 0.748× its time (see README, Performance). In 2D, where the outer product
@@ -800,7 +802,8 @@ fn regular_gather_by_rows<const D: usize>(
         let u: [Vector<D>; 3] = std::array::from_fn(|a| {
             let (i, w) = (origin + row + a * stride, s.w[0][a] * w_rest);
             if let Some(r) = ratio {
-                // SAFETY: i ≤ the stencil's last node (`Stencil::for_each_row`), in bounds (checked above).
+                // SAFETY: i ≤ the stencil's last node (`Stencil::for_each_row`'s bound), in bounds (checked
+                // above).
                 jbar += w * unsafe { r.get_unchecked(i) }.1;
             }
             // SAFETY: as above.
@@ -890,8 +893,6 @@ mod tests {
         vec![Material::Fluid(WeaklyCompressibleFluid::dust(1.0))]
     }
 
-    /// With no walls and no stress, P2G → G2P conserves mass, linear and angular momentum to
-    /// round-off (relative 1e-12: a few hundred additions of O(1) terms in double precision).
     /// The gather by rows is the per-node gather regrouped: the velocity, `Σ w v dᵀ` and the J-bar average of
     /// particles anywhere in a cell agree with the per-node sums to rounding (relative 1e-13 of the sums'
     /// scale, ~500 ulp, in 2D and 3D), and without volume ratios the average is 0.
@@ -928,6 +929,8 @@ mod tests {
         check::<3>();
     }
 
+    /// With no walls and no stress, P2G → G2P conserves mass, linear and angular momentum to
+    /// round-off (relative 1e-12: a few hundred additions of O(1) terms in double precision).
     #[test]
     fn transfers_conserve_mass_and_momentum() {
         let h = 0.05;
