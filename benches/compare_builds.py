@@ -1,17 +1,17 @@
 """Two builds of the engine in one process, alternated: the honest way to tell a small change from noise.
 
-    python benches/compare_builds.py NEW.so OLD.so [--resolution 256] [--dim 2] [--method naive] [--steps 10]
-        [--rounds 60] [--threads 1] [--warm-up 3] [--scene paper/fluid_incline_noslip] [--ops]
+    python benches/compare_builds.py NEW.so OLD.so [--resolution 256] [--dim 2] [--method naive] [--precision f64]
+        [--steps 10] [--rounds 60] [--threads 1] [--warm-up 3] [--scene paper/fluid_incline_noslip] [--ops]
 
 Each argument is a built extension (`python/augmpm/_core.abi3.so` of a checkout, or one unpacked from a
 wheel: `maturin build --release`). Both step the same dam break (`augmpm.bench.dam_break_scene`, or
-`dam_break_3d_scene` with `--dim 3`), or the scene file (or shipped scene's name) of `--scene`, built once
-each, `--steps` steps a round, in alternating order (A B, B A, …), so that the machine's drift and the run
-order fall on both alike. Printed per stage (the engine's stage timers, ns a particle-step): the median of
-each build, the median and range of the round-by-round ratio A/B, the ratio of the fastest rounds (on a
-shared machine interference mostly slows a round down), and a 95% confidence interval for the median ratio
-(`median_interval`; from 6 rounds on): a change whose interval holds 1 is not told from noise. Whole-process
-timings include start-up and scene building; this does not.
+`dam_break_3d_scene` with `--dim 3`; f64 unless `--precision f32`), or the scene file (or shipped scene's
+name) of `--scene`, built once each, `--steps` steps a round, in alternating order (A B, B A, …), so that
+the machine's drift and the run order fall on both alike. Printed per stage (the engine's stage timers, ns a
+particle-step): the median of each build, the median and range of the round-by-round ratio A/B, the ratio of
+the fastest rounds (on a shared machine interference mostly slows a round down), and a 95% confidence
+interval for the median ratio (`median_interval`; from 6 rounds on): a change whose interval holds 1 is not
+told from noise. Whole-process timings include start-up and scene building; this does not.
 
 The scene is built by the installed `augmpm`: both builds must read its scene format. The same file given
 twice is one library, loaded once: the two then share an engine module (an A/A run).
@@ -66,6 +66,9 @@ def main() -> None:
     )
     parser.add_argument("--dim", type=int, choices=[2, 3], help="the 2D (default) or the 3D dam break")
     parser.add_argument("--method", default="naive", choices=["naive", "augmented"])
+    parser.add_argument(
+        "--precision", choices=["f64", "f32"], help="the dam break's precision (default f64; a scene file sets its own)"
+    )
     parser.add_argument("--steps", type=int, default=10, help="steps a round")
     parser.add_argument("--rounds", type=int, default=60, help="rounds of each build (even: each goes first as often)")
     parser.add_argument("--threads", type=int, default=1)
@@ -91,8 +94,11 @@ def main() -> None:
     if args.steps < 1:
         parser.error(f"--steps {args.steps}: must be at least 1")
     if args.scene is not None:
-        if args.dim is not None or args.resolution is not None:
-            parser.error("--scene: the scene sets its own grid (--dim and --resolution are the dam break's)")
+        if args.dim is not None or args.resolution is not None or args.precision is not None:
+            parser.error(
+                "--scene: the scene sets its own grid and precision (--dim, --resolution and --precision are the "
+                "dam break's)"
+            )
         try:
             scene = load_scene(args.scene).to_json()
         except SceneError as e:
@@ -101,8 +107,10 @@ def main() -> None:
     else:
         dim = args.dim or 2
         resolution = args.resolution or (256 if dim == 2 else 64)
-        scene = (bench.dam_break_scene if dim == 2 else bench.dam_break_3d_scene)(resolution).to_json()
-        what = f"{dim}D dam break at {resolution}"
+        precision = args.precision or "f64"
+        dam_break = (bench.dam_break_scene if dim == 2 else bench.dam_break_3d_scene)(resolution)
+        scene = dam_break.model_copy(update={"precision": precision}).to_json()
+        what = f"{dim}D dam break at {resolution}, {precision}"
     if args.ops:
         try:
             opcount.require_tools()

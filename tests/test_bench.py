@@ -279,7 +279,8 @@ def test_roofline_table_reads_the_machine_roofs():
 def test_compare_builds_alternates_two_builds_in_one_process():
     """benches/compare_builds.py steps a dam break with each build and prints, per stage, the two medians and
     the ratios: the same build against itself gives a step time and ratios near 1; an odd --rounds is refused;
-    --scene steps a shipped scene instead, and a scene it cannot read is refused by name."""
+    --scene steps a shipped scene instead, and a scene it cannot read is refused by name; --precision f32 steps
+    the dam break in single precision."""
     import subprocess
     import sys
 
@@ -309,7 +310,10 @@ def test_compare_builds_alternates_two_builds_in_one_process():
     missing = subprocess.run([*on_scene, "no/such_scene"], capture_output=True, text=True, timeout=60)
     assert missing.returncode == 2 and "--scene: no/such_scene" in missing.stderr
     both = subprocess.run([*on_scene, "paper/fluid_incline_noslip", "--dim", "3"], capture_output=True, text=True)
-    assert both.returncode == 2 and "--dim and --resolution" in both.stderr
+    assert both.returncode == 2 and "--dim, --resolution and --precision" in both.stderr
+    single = subprocess.run([*args, "--rounds", "2", "--precision", "f32"], capture_output=True, text=True, timeout=120)
+    assert single.returncode == 0, single.stderr
+    assert single.stdout.startswith("2D dam break at 128, f32, naive")
 
 
 def test_median_interval_is_the_sign_tests():
