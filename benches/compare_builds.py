@@ -26,6 +26,7 @@ the start, where the timed rounds may run one long mixed.
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import subprocess
 import sys
@@ -107,10 +108,10 @@ def main() -> None:
     else:
         dim = args.dim or 2
         resolution = args.resolution or (256 if dim == 2 else 64)
-        precision = args.precision or "f64"
         dam_break = (bench.dam_break_scene if dim == 2 else bench.dam_break_3d_scene)(resolution)
-        scene = dam_break.model_copy(update={"precision": precision}).to_json()
-        what = f"{dim}D dam break at {resolution}, {precision}"
+        scene = dam_break.model_copy(update={"precision": args.precision or "f64"}).to_json()
+        # The precision as the scene the builds step holds it.
+        what = f"{dim}D dam break at {resolution}, {json.loads(scene)['precision']}"
     if args.ops:
         try:
             opcount.require_tools()

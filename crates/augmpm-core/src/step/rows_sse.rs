@@ -36,10 +36,11 @@ pub unsafe fn gather_rows_f32(
 ) -> RowSums {
     // SAFETY (the loads below): every node of the stencil is at most `last`, in bounds by the caller.
     unsafe {
-        // (x, y, z, 0) of node i: 8 bytes then 4, never past the vector.
+        // (x, y, z, 0) of node i: 8 bytes (an unaligned integer load: the array is aligned to 4 bytes) then 4,
+        // never past the vector.
         let load = |i: usize| {
             let p = velocity.add(3 * i);
-            _mm_movelh_ps(_mm_castpd_ps(_mm_load_sd(p as *const f64)), _mm_load_ss(p.add(2)))
+            _mm_movelh_ps(_mm_castsi128_ps(_mm_loadl_epi64(p as *const __m128i)), _mm_load_ss(p.add(2)))
         };
         let zero = _mm_setzero_ps();
         let (mut vn, mut m0, mut m1, mut m2, mut jbar) = (zero, zero, zero, zero, 0.0f32);

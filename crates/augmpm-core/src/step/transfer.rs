@@ -781,11 +781,13 @@ where
 /// particle's position in the stencil), column k is `h (m_k − fx_k v)`, `m_k = Σ_i o_k w v_i`. A node adds
 /// `w v_i` to its row's sum; a row adds its sum to the velocity, and its nodes' first-axis moment and its
 /// sum times its other offsets to the moments: about 14 operations a node (the weight and `w v_i` included)
-/// where the per-node sums took 26.
-/// Equal to the per-node sums to rounding, not bitwise: `m_k` and `fx_k v` are of the size of the velocities,
-/// so B's rounding error is of the per-node sums' order, ε |v| h. 3D dam break at 64³, f64, one thread, against the per-node loop
-/// and a separate J-bar loop: G2P 0.748× its time (see README, Performance). In 2D, where the outer product
-/// is 8 of a node's 13 operations, the row form was no faster (G2P 1.007×), and the per-node loop stays.
+/// where the per-node sums took 26. Equal to the per-node sums to rounding, not bitwise: `m_k` and `fx_k v`
+/// are of the size of the velocities, so B's rounding error is of the per-node sums' order, ε |v| h.
+///
+/// 3D dam break at 64³, f64, one thread, against the per-node loop and a separate J-bar loop: G2P 0.748× its
+/// time (see README, Performance). In 2D, where the outer product is 8 of a node's 13 operations, the row form
+/// was no faster (G2P 1.007×), and the per-node loop stays. In f32 on x86-64 the row sums are taken in SSE2
+/// registers ([`crate::step::rows_sse`]), bitwise the same.
 #[inline(always)]
 fn regular_gather_by_rows<const D: usize>(
     layout: &GridLayout<D>,
@@ -798,13 +800,15 @@ fn regular_gather_by_rows<const D: usize>(
     assert!(last < velocity.len() && ratio.is_none_or(|r| last < r.len()));
     #[cfg(all(target_arch = "x86_64", feature = "f32"))]
     if D == 3 {
-        // The same sums in SSE2 registers, bitwise equal (`rows_sse`): G2P 0.856× its time (f64 keeps this loop).
+        // The same sums in SSE2 registers, bitwise equal (`rows_sse`): G2P 0.856× its time (f64 keeps the
+        // loop below).
         let strides: [usize; 3] = std::array::from_fn(|k| layout.strides()[k]);
         let w: [[Real; 3]; 3] = std::array::from_fn(|k| s.w[k]);
-        const { assert!(std::mem::size_of::<Vector<3>>() == 3 * std::mem::size_of::<Real>()) };
+        const { assert!(std::mem::size_of::<Vector<D>>() == D * std::mem::size_of::<Real>()) };
         let velocity = velocity.as_ptr() as *const Real;
-        // SAFETY: a `Vector<3>` is three contiguous reals (checked above), so the nodes' velocities are
-        // `3 len` reals; the stencil's last node is in bounds of both arrays (asserted above).
+        // SAFETY: a `Vector<D>` is its D reals in order, without padding (nalgebra's `Matrix` is `repr(C)` over
+        // `ArrayStorage`, `repr(transparent)` over `[[Real; D]; 1]`; the size checked above), so the nodes'
+        // velocities are `3 len` reals; the stencil's last node is in bounds of both arrays (asserted above).
         let sums = unsafe { crate::step::rows_sse::gather_rows_f32(velocity, ratio, origin, &strides, &w) };
         let v = Vector::<D>::from_fn(|k, _| sums.velocity[k]);
         let mut b = Matrix::<D>::zeros();
