@@ -798,6 +798,24 @@ fn regular_gather_by_rows<const D: usize>(
 ) -> (Vector<D>, Matrix<D>, Real) {
     let last = last_node(layout, origin);
     assert!(last < velocity.len() && ratio.is_none_or(|r| last < r.len()));
+    let (vn, moments, jbar) = row_sums(layout, s, origin, velocity, ratio);
+    let mut b = Matrix::<D>::zeros();
+    for (k, m) in moments.iter().enumerate() {
+        b.set_column(k, &((m - vn * s.fx[k]) * layout.h));
+    }
+    (vn, b, jbar)
+}
+
+/// The sums [`regular_gather_by_rows`] forms B from: `Σ w v_i`, the first moments `Σ o_k w v_i` and `Σ w J_i`
+/// (0 without `ratio`), the stencil's last node in bounds of both arrays (checked by the caller).
+#[inline(always)]
+fn row_sums<const D: usize>(
+    layout: &GridLayout<D>,
+    s: &Stencil<D>,
+    origin: usize,
+    velocity: &[Vector<D>],
+    ratio: Option<&[(Real, Real)]>,
+) -> (Vector<D>, [Vector<D>; D], Real) {
     #[cfg(all(target_arch = "x86_64", feature = "f32"))]
     if D == 3 {
         // The same sums in SSE2 registers, bitwise equal (`rows_sse`): G2P 0.856× its time (f64 keeps the
@@ -806,16 +824,13 @@ fn regular_gather_by_rows<const D: usize>(
         let w: [[Real; 3]; 3] = std::array::from_fn(|k| s.w[k]);
         const { assert!(std::mem::size_of::<Vector<D>>() == D * std::mem::size_of::<Real>()) };
         let velocity = velocity.as_ptr() as *const Real;
-        // SAFETY: a `Vector<D>` is its D reals in order, without padding (nalgebra's `Matrix` is `repr(C)` over
-        // `ArrayStorage`, `repr(transparent)` over `[[Real; D]; 1]`; the size checked above), so the nodes'
-        // velocities are `3 len` reals; the stencil's last node is in bounds of both arrays (asserted above).
+        // SAFETY: a `Vector<D>` is its D reals in order, without padding (nalgebra's `Matrix` is `repr(C)`
+        // over `ArrayStorage`, `repr(transparent)` over `[[Real; D]; 1]`; the size checked above), so the
+        // nodes' velocities are `3 len` reals; the stencil's last node is in bounds of both arrays (checked by
+        // the caller).
         let sums = unsafe { crate::step::rows_sse::gather_rows_f32(velocity, ratio, origin, &strides, &w) };
-        let v = Vector::<D>::from_fn(|k, _| sums.velocity[k]);
-        let mut b = Matrix::<D>::zeros();
-        for (k, m) in sums.moments.iter().enumerate() {
-            b.set_column(k, &((Vector::<D>::from_fn(|j, _| m[j]) - v * s.fx[k]) * layout.h));
-        }
-        return (v, b, sums.jbar);
+        let vector = |x: &[Real; 3]| Vector::<D>::from_fn(|k, _| x[k]);
+        return (vector(&sums.velocity), std::array::from_fn(|k| vector(&sums.moments[k])), sums.jbar);
     }
     let (mut vn, mut moments, mut jbar) = (Vector::<D>::zeros(), [Vector::<D>::zeros(); D], 0.0);
     let stride = layout.strides()[0];
@@ -823,8 +838,8 @@ fn regular_gather_by_rows<const D: usize>(
         let u: [Vector<D>; 3] = std::array::from_fn(|a| {
             let (i, w) = (origin + row + a * stride, s.w[0][a] * w_rest);
             if let Some(r) = ratio {
-                // SAFETY: i ≤ the stencil's last node (`Stencil::for_each_row`'s bound), in bounds (checked
-                // above).
+                // SAFETY: i ≤ the stencil's last node (`Stencil::for_each_row`'s bound), in bounds
+                // (checked by the caller).
                 jbar += w * unsafe { r.get_unchecked(i) }.1;
             }
             // SAFETY: as above.
@@ -837,11 +852,7 @@ fn regular_gather_by_rows<const D: usize>(
         }
         vn += across;
     });
-    let mut b = Matrix::<D>::zeros();
-    for (k, m) in moments.iter().enumerate() {
-        b.set_column(k, &((m - vn * s.fx[k]) * layout.h));
-    }
-    (vn, b, jbar)
+    (vn, moments, jbar)
 }
 
 /// Whether the particles hold F for each of them where a material keeps one (otherwise they read F = I).
