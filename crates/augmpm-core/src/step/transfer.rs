@@ -13,7 +13,8 @@ use crate::material::{ConstitutiveModel, Material, MaterialPoint};
 use crate::math::{Dim, DimOps, Matrix, Real, Vector};
 use crate::parallel::{prefetch, task_len, Disjoint, MIN_BLOCKS};
 use crate::particles::Particles;
-use crate::step::schedule::{stencil_in_grid, Schedule};
+use crate::step::schedule::{stencil_in_grid, Reach, Schedule};
+use crate::step::tile::{with_tile, Tile};
 use crate::treatment::augmented::{AugmentedGrid, AugmentedTransfer, WallEntry, WallParticles};
 use crate::treatment::wall_fit::WallPush;
 use rayon::prelude::*;
@@ -302,7 +303,10 @@ pub fn p2g<const D: usize>(
     };
     // Copies of the arrays' pointers (as in the scatters below), which no grid store can alias.
     let P2gOut { mass, spline, momentum, .. } = out;
-    t.schedule.for_each_block(|reach, block| {
+    // 3D in f32: the particles away from walls scatter into a tile per block ([`super::tile`]); f64 and 2D
+    // straight into the grid (measured: the tile took 1.16× P2G's time in 3D f64, 1.19× in 2D).
+    let tiles = D == 3 && !track_spline && cfg!(feature = "f32");
+    let p2g_block = |reach: &Reach<D>, block: &[u32], mut tile: Option<&mut Tile>| {
         for (k, &p) in block.iter().enumerate() {
             if let Some(&ahead) = block.get(k + PREFETCH_AHEAD) {
                 prefetch_particle(particles, ahead as usize);
@@ -345,8 +349,9 @@ pub fn p2g<const D: usize>(
                 unsafe { out.scatter_volume(layout, &s, origin, volumes) };
             }
             let (mp, vp, cp) = (particles.mass[p], particles.v[p], particles.c[p]);
-            match t.augmented.and_then(|(g, table)| table.entry(p).map(|e| (g, e))) {
-                None => {
+            match (t.augmented.and_then(|(g, table)| table.entry(p).map(|e| (g, e))), tile.as_deref_mut()) {
+                (None, Some(tile)) => tile.scatter(reach, &s, h, mp, &(vp * mp), &(cp * mp - stress * apic)),
+                (None, None) => {
                     let node = RegularNode { mp, mv: vp * mp, affine: cp * mp - stress * apic };
                     // SAFETY: exclusive as stated above.
                     unsafe {
@@ -357,7 +362,7 @@ pub fn p2g<const D: usize>(
                         }
                     }
                 }
-                Some((g, entry @ WallEntry { minv, near, total, tilt, .. })) => {
+                (Some((g, entry @ WallEntry { minv, near, total, tilt, .. })), _) => {
                     let mut force = stress * dt;
                     if g.transfer == AugmentedTransfer::Stable
                         && material.smooths_volume_ratio()
@@ -393,6 +398,18 @@ pub fn p2g<const D: usize>(
                     }
                 }
             }
+        }
+    };
+    t.schedule.for_each_block(|reach, block| {
+        if tiles {
+            with_tile(|tile| {
+                tile.begin();
+                p2g_block(reach, block, Some(tile));
+                // SAFETY: the blocks scattered together never share a grid point (see `schedule`).
+                unsafe { tile.add_to_grid(layout, reach, mass, momentum) };
+            });
+        } else {
+            p2g_block(reach, block, None);
         }
     });
 }
@@ -959,6 +976,68 @@ mod tests {
         }
         check::<2>();
         check::<3>();
+    }
+
+    /// The 3D tile's scatter gives each node the sums of the per-node scatter, regrouped: mass and momentum
+    /// agree to rounding (1e-12 of the sums' scale: ~20 particles a node, terms of O(1)), on a grid of
+    /// several blocks and both colourings' neighbours, with every node outside the stencils left zero.
+    #[test]
+    fn the_3d_tile_gives_the_nodes_the_per_node_sums() {
+        let layout = GridLayout::<3>::new(0.05, [20; 3]);
+        let mut s = 5u64;
+        let mut rnd = || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut ps = Particles::<3>::default();
+        for _ in 0..4000 {
+            let x = Vector::<3>::from_fn(|_, _| 0.1 + 0.8 * rnd());
+            ps.push(x, Vector::<3>::from_fn(|_, _| rnd() - 0.5), 0.5 + rnd(), 1.0, 0);
+            let last = ps.len() - 1;
+            ps.c[last] = Matrix::<3>::from_fn(|_, _| rnd() - 0.5);
+        }
+        let mut schedule = Schedule::new(&layout);
+        schedule.sort(&layout, &ps.x, &mut Binning::default()).unwrap();
+        // The tile's scatter as P2G runs it in f32 (this crate's tests run in f64), block by block.
+        let mut grid = GridState::new(layout.num_nodes(), false);
+        let (grid_mass, grid_momentum) = (Disjoint::new(&mut grid.mass), Disjoint::new(&mut grid.momentum));
+        schedule.for_each_block(|reach, block| {
+            with_tile(|tile| {
+                tile.begin();
+                for &p in block {
+                    let p = p as usize;
+                    let (st, _) = stencil(&layout, &ps.x[p], 1.0 / layout.h);
+                    reach.check(&st.base);
+                    let (mp, affine) = (ps.mass[p], ps.c[p] * ps.mass[p]);
+                    tile.scatter(reach, &st, layout.h, mp, &(ps.v[p] * mp), &affine);
+                }
+                // SAFETY: blocks of one colour share no node; one thread here.
+                unsafe { tile.add_to_grid(&layout, reach, grid_mass, grid_momentum) };
+            })
+        });
+
+        let (mut mass, mut momentum) = (vec![0.0; layout.num_nodes()], vec![Vector::<3>::zeros(); layout.num_nodes()]);
+        for p in 0..ps.len() {
+            let (st, origin) = stencil(&layout, &ps.x[p], 1.0 / layout.h);
+            let (mp, affine) = (ps.mass[p], ps.c[p] * ps.mass[p]);
+            st.for_each_index(layout.h, origin, layout.strides(), |i, w, d| {
+                mass[i] += w * mp;
+                momentum[i] += (ps.v[p] * mp + affine * d) * w;
+            });
+        }
+        for i in 0..layout.num_nodes() {
+            assert!(
+                (grid.mass[i] - mass[i]).abs() < 1e-12 * 20.0,
+                "node {i}: mass {} against {}",
+                grid.mass[i],
+                mass[i]
+            );
+            assert!((grid.momentum[i] - momentum[i]).amax() < 1e-12 * 20.0, "node {i}: momentum");
+            if mass[i] == 0.0 {
+                assert_eq!((grid.mass[i], grid.momentum[i]), (0.0, Vector::<3>::zeros()), "node {i}: untouched");
+            }
+        }
+        assert!(mass.iter().filter(|&&m| m > 0.0).count() > 5000, "the particles reach most nodes");
     }
 
     /// With no walls and no stress, P2G → G2P conserves mass, linear and angular momentum to
