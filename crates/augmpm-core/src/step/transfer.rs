@@ -979,8 +979,9 @@ mod tests {
     }
 
     /// The 3D tile's scatter gives each node the sums of the per-node scatter, regrouped: mass and momentum
-    /// agree to rounding (1e-12 of the sums' scale: ~20 particles a node, terms of O(1)), on a grid of
-    /// several blocks and both colourings' neighbours, with every node outside the stencils left zero.
+    /// agree to rounding (1e-12 of the sums' scale: ~20 particles a node, terms of O(1)) on a grid of several
+    /// blocks along each axis, whose tiles overlap their neighbours', and every node outside the stencils is
+    /// left zero.
     #[test]
     fn the_3d_tile_gives_the_nodes_the_per_node_sums() {
         let layout = GridLayout::<3>::new(0.05, [20; 3]);
