@@ -6,7 +6,8 @@
 //! of three nodes is contiguous with constant strides. Against the scatter straight into the grid's mass and
 //! momentum arrays (64³ dam break, one thread, `benches/compare_builds.py`, medians of round ratios): f32
 //! P2G 0.816× its time (95% interval of the median 0.813–0.826), the step 0.905×; callgrind, 32³: P2G 1,519
-//! → 1,243 instructions a particle-step. Used in 3D f32 only: in f64 (1,546 → 1,496 instructions, a node's
+//! → 1,243 instructions a particle-step. Used in 3D f32 only, and not with the paper's transfer (whose
+//! B-spline mass it does not hold): in f64 (1,546 → 1,496 instructions, a node's
 //! four numbers in two registers) P2G took 1.16× (1.03–1.31), and in 2D 1.19× (a block's nodes are few and
 //! already in the first-level cache there).
 //!
@@ -43,7 +44,8 @@ thread_local! {
         const { RefCell::new(Tile { nodes: Vec::new(), lo: [0; 3], hi: [0; 3], open: false }) };
 }
 
-/// Calls `f` with this thread's tile (88 KiB in f64, 44 KiB in f32, allocated at the first use).
+/// Calls `f` with this thread's tile (2,744 nodes of four numbers: 43 KiB in f32, allocated at the first
+/// use).
 pub fn with_tile<R>(f: impl FnOnce(&mut Tile) -> R) -> R {
     TILE_OF_THREAD.with(|t| f(&mut t.borrow_mut()))
 }
@@ -76,10 +78,11 @@ impl Tile {
         debug_assert_eq!(D, 3, "tiles are 3D");
         let mut at = 0;
         for k in (0..3).rev() {
-            let l = (s.base[k] - reach.lo[k]) as usize;
-            // Within the tile (the reach check has made sure of it; this keeps the writes below in bounds
-            // whatever the caller did).
-            assert!(l + 2 < TILE);
+            // Within the tile: the reach check has made sure of it, and this keeps the writes below in
+            // bounds whatever the caller did.
+            let l = s.base[k] - reach.lo[k];
+            assert!((0..(TILE - 2) as i64).contains(&l), "stencil origin outside the block's tile");
+            let l = l as usize;
             self.lo[k] = self.lo[k].min(l);
             self.hi[k] = self.hi[k].max(l);
             at = at * TILE + l;
@@ -122,8 +125,8 @@ impl Tile {
         momentum: Disjoint<'_, Vector<D>>,
     ) {
         debug_assert_eq!(D, 3, "tiles are 3D");
-        self.open = false;
         if self.lo[0] == usize::MAX {
+            self.open = false;
             return;
         }
         let strides = layout.strides();
@@ -146,5 +149,7 @@ impl Tile {
                 }
             }
         }
+        // Only now: a panic above leaves the tile to be zeroed whole by the next `begin`.
+        self.open = false;
     }
 }

@@ -303,9 +303,7 @@ pub fn p2g<const D: usize>(
     };
     // Copies of the arrays' pointers (as in the scatters below), which no grid store can alias.
     let P2gOut { mass, spline, momentum, .. } = out;
-    // 3D in f32: the particles away from walls scatter into a tile per block ([`super::tile`]); f64 and 2D
-    // straight into the grid (measured: the tile took 1.16× P2G's time in 3D f64, 1.19× in 2D).
-    let tiles = D == 3 && !track_spline && cfg!(feature = "f32");
+    let tiles = through_tiles::<D>(track_spline);
     let p2g_block = |reach: &Reach<D>, block: &[u32], mut tile: Option<&mut Tile>| {
         for (k, &p) in block.iter().enumerate() {
             if let Some(&ahead) = block.get(k + PREFETCH_AHEAD) {
@@ -412,6 +410,19 @@ pub fn p2g<const D: usize>(
             p2g_block(reach, block, None);
         }
     });
+}
+
+/// Whether P2G scatters the particles away from walls into a tile per block ([`super::tile`]): in 3D f32,
+/// unless the paper's transfer needs the B-spline mass (`track_spline`), which the tile does not hold. f64
+/// and 2D scatter straight into the grid (measured: the tile took 1.16× P2G's time in 3D f64, 1.19× in 2D).
+/// This crate's tests run in f64 and turn the tiles on with `tests::TILES`.
+#[inline(always)]
+fn through_tiles<const D: usize>(track_spline: bool) -> bool {
+    #[cfg(test)]
+    let in_tests = tests::TILES.with(|t| t.get());
+    #[cfg(not(test))]
+    let in_tests = false;
+    D == 3 && !track_spline && (cfg!(feature = "f32") || in_tests)
 }
 
 /// The grid arrays P2G writes, each shared by the blocks scattered together (which never share a node).
@@ -978,6 +989,68 @@ mod tests {
         check::<3>();
     }
 
+    thread_local! {
+        /// P2G scatters through tiles in 3D f64 too, on this thread ([`through_tiles`]).
+        pub static TILES: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+    }
+
+    /// P2G through the 3D tiles gives the grid of the direct scatter, regrouped: a water body of random J
+    /// (stress from its pressure and viscosity) with its J-bar sums, whose mass, momentum and J-bar sums agree
+    /// node by node to rounding (1e-12 of each field's largest value: ~20 particles a node); on one thread,
+    /// where the tiles are those P2G runs in f32.
+    #[test]
+    fn p2g_through_tiles_gives_the_grid_of_the_direct_scatter() {
+        let layout = GridLayout::<3>::new(0.05, [20; 3]);
+        let mut s = 11u64;
+        let mut rnd = || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut ps = Particles::<3>::default();
+        for _ in 0..4000 {
+            let x = Vector::<3>::from_fn(|_, _| 0.1 + 0.8 * rnd());
+            ps.push(x, Vector::<3>::from_fn(|_, _| rnd() - 0.5), 0.5 + rnd(), 1e-3, 0);
+            let last = ps.len() - 1;
+            ps.c[last] = Matrix::<3>::from_fn(|_, _| rnd() - 0.5);
+            ps.jp[last] = 0.9 + 0.2 * rnd();
+        }
+        let water = WeaklyCompressibleFluid {
+            stiffness: 1e5,
+            gamma: 7.0,
+            viscosity: 1e-3,
+            density_estimate: crate::material::DensityEstimate::Deformation,
+            ..WeaklyCompressibleFluid::dust(1000.0)
+        };
+        let materials = vec![Material::Fluid(water)];
+        let mut schedule = Schedule::new(&layout);
+        schedule.sort(&layout, &ps.x, &mut Binning::default()).unwrap();
+        let t = Transfer { layout: &layout, schedule: &schedule, augmented: None };
+        let run = |materials: &[Material], tiles: bool| {
+            TILES.with(|t| t.set(tiles));
+            let mut grid = GridState::new(layout.num_nodes(), false);
+            let mut ratio = VolumeRatio::new(layout.num_nodes());
+            let mut density = vec![0.0; ps.len()];
+            p2g(&t, materials, &ps, None, &mut density, 1e-4, &mut grid, &mut ratio);
+            TILES.with(|t| t.set(false));
+            (grid, ratio, density)
+        };
+        let (direct, direct_ratio, direct_density) = run(&materials, false);
+        let (tiled, tiled_ratio, tiled_density) = run(&materials, true);
+        assert_eq!(tiled_density, direct_density);
+        let m_scale = direct.mass.iter().fold(0.0f64, |a, &m| a.max(m));
+        let p_scale = direct.momentum.iter().fold(0.0f64, |a, p| a.max(p.amax()));
+        // The stress is in the sums compared: without it the momentum moves by a good part of its scale.
+        let (stress_free, _, _) = run(&dust(), false);
+        let by_stress =
+            (0..layout.num_nodes()).fold(0.0f64, |a, i| a.max((direct.momentum[i] - stress_free.momentum[i]).amax()));
+        assert!(by_stress > 0.1 * p_scale, "the stress moves the momentum by {by_stress} of {p_scale}");
+        for i in 0..layout.num_nodes() {
+            assert!((tiled.mass[i] - direct.mass[i]).abs() <= 1e-12 * m_scale, "node {i}: mass");
+            assert!((tiled.momentum[i] - direct.momentum[i]).amax() <= 1e-12 * p_scale, "node {i}: momentum");
+            assert_eq!(tiled_ratio.nodes[i], direct_ratio.nodes[i], "node {i}: the J-bar sums, scattered directly");
+        }
+    }
+
     /// The 3D tile's scatter gives each node the sums of the per-node scatter, regrouped: mass and momentum
     /// agree to rounding (1e-12 of the sums' scale: ~20 particles a node, terms of O(1)) on a grid of several
     /// blocks along each axis, whose tiles overlap their neighbours', and every node outside the stencils is
@@ -1211,7 +1284,7 @@ mod tests {
         let h = 0.1;
         let water = Material::Fluid(WeaklyCompressibleFluid {
             density: 1000.0,
-            stiffness: 1e4,
+            stiffness: 1e5,
             gamma: 7.0,
             viscosity: 1.0,
             min_pressure: 0.0,
