@@ -5,11 +5,11 @@
 //! A node's four sums are then one short vector (one SSE register in f32, two in f64), and a stencil's row
 //! of three nodes is contiguous with constant strides. Against the scatter straight into the grid's mass and
 //! momentum arrays (64³ dam break, one thread, `benches/compare_builds.py`, medians of round ratios): f32
-//! P2G 0.816× its time (95% interval of the median 0.813–0.826), the step 0.905×; callgrind, 32³: P2G 1,519
-//! → 1,243 instructions a particle-step. Used in 3D f32 only, and not with the paper's transfer (whose
-//! B-spline mass it does not hold): in f64 (1,546 → 1,496 instructions, a node's
-//! four numbers in two registers) P2G took 1.16× (1.03–1.31), and in 2D 1.19× (a block's nodes are few and
-//! already in the first-level cache there).
+//! P2G 0.82–0.88× its time in two runs (95% intervals of the median 0.813–0.826 and 0.866–0.885), the step
+//! 0.905–0.947×; callgrind, 32³: P2G 1,519 → 1,373 instructions a particle-step. Used in 3D f32 only, and
+//! not with the paper's transfer (whose B-spline mass it does not hold): in f64 (a node's four numbers in two
+//! registers) P2G took 1.16× (1.03–1.31), and in 2D 1.19× (a block's nodes are few and already in the
+//! first-level cache there).
 //!
 //! The grid sums are not bitwise those of the direct scatter: a node adds the block's sum at once. They are
 //! the same on any number of threads: one thread scatters a block, its particles in their order, and adds
