@@ -994,14 +994,10 @@ mod tests {
         pub static TILES: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
     }
 
-    /// P2G through the 3D tiles gives the grid of the direct scatter, regrouped: a water body of random J
-    /// (stress from its pressure and viscosity) with its J-bar sums, whose mass, momentum and J-bar sums agree
-    /// node by node to rounding (1e-12 of each field's largest value: ~20 particles a node); on one thread,
-    /// where the tiles are those P2G runs in f32.
-    #[test]
-    fn p2g_through_tiles_gives_the_grid_of_the_direct_scatter() {
-        let layout = GridLayout::<3>::new(0.05, [20; 3]);
-        let mut s = 11u64;
+    /// 4,000 particles spread over [0.1, 0.9]³ m (inside a 20³ grid of 0.05 m cells, 1 m wide), with random
+    /// velocities, masses (0.5–1.5 kg), rest volumes 1e-3 m³, C and J in [0.9, 1.1], drawn from `seed`.
+    fn particles_in_a_box_3d(seed: u64) -> Particles<3> {
+        let mut s = seed;
         let mut rnd = || {
             s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             (s >> 11) as f64 / (1u64 << 53) as f64
@@ -1014,6 +1010,17 @@ mod tests {
             ps.c[last] = Matrix::<3>::from_fn(|_, _| rnd() - 0.5);
             ps.jp[last] = 0.9 + 0.2 * rnd();
         }
+        ps
+    }
+
+    /// P2G through the 3D tiles gives the grid of the direct scatter, regrouped: a water body of random J
+    /// (stress from its pressure and viscosity) with its J-bar sums, whose mass, momentum and J-bar sums agree
+    /// node by node to rounding (1e-12 of each field's largest value: ~20 particles a node); on one thread,
+    /// where the tiles are those P2G runs in f32.
+    #[test]
+    fn p2g_through_tiles_gives_the_grid_of_the_direct_scatter() {
+        let layout = GridLayout::<3>::new(0.05, [20; 3]);
+        let ps = particles_in_a_box_3d(11);
         let water = WeaklyCompressibleFluid {
             stiffness: 1e5,
             gamma: 7.0,
@@ -1058,18 +1065,7 @@ mod tests {
     #[test]
     fn the_3d_tile_gives_the_nodes_the_per_node_sums() {
         let layout = GridLayout::<3>::new(0.05, [20; 3]);
-        let mut s = 5u64;
-        let mut rnd = || {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
-        let mut ps = Particles::<3>::default();
-        for _ in 0..4000 {
-            let x = Vector::<3>::from_fn(|_, _| 0.1 + 0.8 * rnd());
-            ps.push(x, Vector::<3>::from_fn(|_, _| rnd() - 0.5), 0.5 + rnd(), 1.0, 0);
-            let last = ps.len() - 1;
-            ps.c[last] = Matrix::<3>::from_fn(|_, _| rnd() - 0.5);
-        }
+        let ps = particles_in_a_box_3d(5);
         let mut schedule = Schedule::new(&layout);
         schedule.sort(&layout, &ps.x, &mut Binning::default()).unwrap();
         // The tile's scatter as P2G runs it in f32 (this crate's tests run in f64), block by block.
