@@ -11,6 +11,7 @@ use crate::motion::WallPose;
 use crate::parallel::Disjoint;
 use crate::particles::{Column, ColumnMut, Field, FieldKind, Particles};
 use crate::rigid::{drift, RigidBody};
+use crate::step::packing::Packing;
 use crate::step::schedule::{Binning, Schedule};
 use crate::step::transfer::{self, G2pOutcome, GridDensity, Transfer, VolumeRatio};
 use crate::treatment::augmented::WallParticles;
@@ -50,6 +51,11 @@ where
 
     fn smooths_volume_ratio(&self) -> bool {
         self.materials.iter().any(ConstitutiveModel::<D>::smooths_volume_ratio)
+    }
+
+    /// Whether a material relaxes its J toward the particles' packing ([`crate::step::packing`]).
+    fn relaxes_to_packing(&self) -> bool {
+        self.materials.iter().any(|m| ConstitutiveModel::<D>::packing_relaxation_time(m).is_some())
     }
 
     /// Whether a material of the model keeps a deformation gradient; without one the particles keep
@@ -328,6 +334,9 @@ struct Scratch<const D: usize> {
     /// Per node, rest volume and rest volume·J of the particles whose J is smoothed (empty when none is);
     /// after the grid update, their ratio J in the second place.
     volume_ratio: VolumeRatio,
+    /// Per node, the volume the particles occupy and the part of the support inside the material, when a
+    /// material relaxes its J toward the packing (empty otherwise); after the grid update, the packing.
+    packing: Packing,
     /// Particles whose MLS system sees a wall, with their inverses (augmented grid only).
     walls: WallParticles<D>,
     /// The impulse each wall gave each particle of `walls` in G2P.
@@ -366,11 +375,18 @@ impl<const D: usize> Scratch<D> {
     }
 
     /// The grid mass of the fluids' `grid` density estimate, where a material needs it; and the volume
-    /// ratio sums, which P2G scatters, cleared.
-    fn scatter_density(&mut self, layout: &GridLayout<D>, particles: &Particles<D>) {
-        let Self { schedule, volume_ratio, density_mass, .. } = self;
+    /// ratio and packing sums, which P2G scatters, cleared (with moving walls, the nodes' support fractions
+    /// where the walls of `region` are now).
+    fn scatter_density(&mut self, layout: &GridLayout<D>, particles: &Particles<D>, region: &dyn Region<D>) {
+        let Self { schedule, volume_ratio, packing, density_mass, .. } = self;
         if !volume_ratio.is_empty() {
             volume_ratio.clear(layout, schedule, schedule.stale());
+        }
+        if !packing.is_empty() {
+            packing.clear(layout, schedule, schedule.stale());
+            if region.moves() {
+                packing.follow_walls(layout, schedule, region);
+            }
         }
         if !density_mass.is_empty() {
             schedule.clear(layout, schedule.stale(), density_mass, 0.0);
@@ -525,6 +541,11 @@ where
             } else {
                 VolumeRatio::default()
             },
+            packing: if model.relaxes_to_packing() {
+                Packing::new(&model.layout, model.region.as_ref())
+            } else {
+                Packing::default()
+            },
             walls: WallParticles::default(),
             pushes: Vec::new(),
             step_impulse: WallImpulses::zeros(model.boundary.contacts().len()),
@@ -595,6 +616,7 @@ where
             grid: s.grid.heap_bytes()
                 + b(&s.density_mass)
                 + s.volume_ratio.heap_bytes()
+                + s.packing.heap_bytes()
                 + s.schedule.block_bytes()
                 + self.model.wall_fraction.as_ref().map_or(0, b)
                 + boundary,
@@ -734,6 +756,7 @@ where
         grid.momentum.fill(Vector::<D>::zeros());
         self.scratch.density_mass.fill(0.0);
         self.scratch.volume_ratio.fill_zero();
+        self.scratch.packing.fill_zero();
         Ok(())
     }
 
@@ -760,24 +783,37 @@ where
         scratch.prepare_grid(layout, &state.particles.x, &mut state.binning).map_err(left)?;
         lap.add_to(&mut times.sort);
         // 2. The grid density's mass (fluids with the paper's density); the J-bar sums cleared.
-        scratch.scatter_density(layout, &state.particles);
+        scratch.scatter_density(layout, &state.particles, model.region.as_ref());
         lap.add_to(&mut times.density);
         // 3. The walls prepare for this step (augmented: the MLS systems of eq. (5) near walls).
         state.ill_conditioned +=
             model.boundary.prepare::<Dim<D>>(layout, &state.particles.x, &mut scratch.walls).map_err(left)?;
         lap.add_to(&mut times.boundary);
 
-        let Scratch { schedule, grid, density_mass, volume_ratio, walls, pushes, step_impulse, .. } = scratch;
+        let Scratch { schedule, grid, density_mass, volume_ratio, packing, walls, pushes, step_impulse, .. } = scratch;
         let t = Transfer { layout, schedule, augmented: model.boundary.transfer_view(walls) };
         let grid_density = (!density_mass.is_empty())
             .then(|| GridDensity { grid_mass: density_mass, wall_fraction: model.wall_fraction.as_deref() });
         // 4. P2G: mass, momentum and the stress force; the volume ratio sums of the J-bar average.
-        transfer::p2g(&t, &model.materials, &state.particles, grid_density, &mut state.density, dt, grid, volume_ratio);
+        transfer::p2g(
+            &t,
+            &model.materials,
+            &state.particles,
+            grid_density,
+            &mut state.density,
+            dt,
+            grid,
+            volume_ratio,
+            packing,
+        );
         lap.add_to(&mut times.p2g);
         // 5. Grid update (momentum → velocity, gravity), then the walls' conditions; the nodes' J.
         state.low_mass_nodes += transfer::grid_velocity(&t, grid, &model.gravity, dt) as u64;
         if !volume_ratio.is_empty() {
             volume_ratio.finish(layout, schedule);
+        }
+        if !packing.is_empty() {
+            packing.finish(layout, schedule);
         }
         step_impulse.clear();
         model.boundary.apply(layout, model.region.as_ref(), &grid.mass, &mut grid.momentum, step_impulse);
@@ -790,6 +826,7 @@ where
             &model.materials,
             &grid.momentum,
             volume_ratio,
+            packing,
             &mut state.particles,
             dt,
             pushes,

@@ -8,6 +8,7 @@ use augmpm_core::grid::{GridLayout, GridState};
 use augmpm_core::material::{Material, WeaklyCompressibleFluid};
 use augmpm_core::math::{Dim, Real};
 use augmpm_core::particles::Particles;
+use augmpm_core::step::packing::Packing;
 use augmpm_core::step::schedule::{Binning, Schedule};
 use augmpm_core::step::transfer::{g2p, grid_velocity, p2g, Transfer, VolumeRatio};
 use augmpm_core::treatment::augmented::{AugmentedGrid, AugmentedTransfer, WallParticles};
@@ -135,14 +136,34 @@ fn round_trip(s: &Setup, ps: &mut Particles<2>, walls_act: bool) -> GridState<2>
     let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
     let mut state = empty_grid(s);
     let mut density = vec![0.0; ps.len()];
-    p2g(&t, &dust(), ps, None, &mut density, 1e-3, &mut state, &mut VolumeRatio::default());
+    p2g(&t, &dust(), ps, None, &mut density, 1e-3, &mut state, &mut VolumeRatio::default(), &mut Packing::default());
     let after_p2g = state.clone();
     grid_velocity(&t, &mut state, &Point::zeros(), 1e-3);
     if walls_act {
         s.grid.apply(&state.mass, &mut state.momentum, &mut augmpm_core::wall::WallImpulses::zeros(s.grid.walls.len()));
-        g2p(&t, &s.walls, &dust(), &state.momentum, &VolumeRatio::default(), ps, 0.0, &mut Vec::new());
+        g2p(
+            &t,
+            &s.walls,
+            &dust(),
+            &state.momentum,
+            &VolumeRatio::default(),
+            &Packing::default(),
+            ps,
+            0.0,
+            &mut Vec::new(),
+        );
     } else {
-        g2p(&t, &NoFeet(&s.walls), &dust(), &state.momentum, &VolumeRatio::default(), ps, 0.0, &mut Vec::new());
+        g2p(
+            &t,
+            &NoFeet(&s.walls),
+            &dust(),
+            &state.momentum,
+            &VolumeRatio::default(),
+            &Packing::default(),
+            ps,
+            0.0,
+            &mut Vec::new(),
+        );
     }
     after_p2g
 }
@@ -221,7 +242,7 @@ proptest! {
         let mut velocity: Vec<Point> = (0..s.layout.num_nodes()).map(|i| field(&s.layout.position(i))).collect();
         velocity.extend(s.grid.points.iter().map(|b| field(&b.x)));
         let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
-        g2p(&t, &s.walls, &dust(), &velocity, &VolumeRatio::default(), &mut ps, 0.0, &mut Vec::new());
+        g2p(&t, &s.walls, &dust(), &velocity, &VolumeRatio::default(), &Packing::default(), &mut ps, 0.0, &mut Vec::new());
         for p in 0..ps.len() {
             prop_assert!((ps.v[p] - field(&ps.x[p])).norm() <= 1e-10, "v {} vs {}", ps.v[p], field(&ps.x[p]));
             prop_assert!((affine(&s, &ps, p) - gradient).norm() <= 1e-8, "C {} vs {}", affine(&s, &ps, p), gradient);
@@ -245,7 +266,17 @@ fn particles_keep_their_spin_across_a_move() {
         let grid_l = |s: &Setup, ps: &Particles<2>| {
             let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
             let mut state = empty_grid(s);
-            p2g(&t, &dust(), ps, None, &mut vec![0.0; ps.len()], 1e-3, &mut state, &mut VolumeRatio::default());
+            p2g(
+                &t,
+                &dust(),
+                ps,
+                None,
+                &mut vec![0.0; ps.len()],
+                1e-3,
+                &mut state,
+                &mut VolumeRatio::default(),
+                &mut Packing::default(),
+            );
             let position = |i: usize| {
                 if i < s.layout.num_nodes() {
                     s.layout.position(i)
@@ -272,7 +303,17 @@ fn particles_keep_their_spin_across_a_move() {
             1e-3,
         );
         let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
-        g2p(&t, &NoFeet(&s.walls), &dust(), &state.momentum, &VolumeRatio::default(), &mut ps, 1e-3, &mut Vec::new());
+        g2p(
+            &t,
+            &NoFeet(&s.walls),
+            &dust(),
+            &state.momentum,
+            &VolumeRatio::default(),
+            &Packing::default(),
+            &mut ps,
+            1e-3,
+            &mut Vec::new(),
+        );
         assert!((own(&ps) - l0).abs() <= 1e-12 * scale, "{angle}°: G2P and the move {} vs {l0}", own(&ps));
         let moved = setup(walls, WallCondition::Sticky, &ps, AugmentedTransfer::Stable);
         let (l1, _) = grid_l(&moved, &ps);
@@ -296,7 +337,17 @@ fn normal_velocity_vanishes_linearly_at_the_wall() {
         let s = setup(walls, cond, &ps, AugmentedTransfer::Stable);
         let velocity = vec![-normal_in; s.layout.num_nodes() + s.grid.points.len()];
         let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
-        g2p(&t, &s.walls, &dust(), &velocity, &VolumeRatio::default(), &mut ps, 0.0, &mut Vec::new());
+        g2p(
+            &t,
+            &s.walls,
+            &dust(),
+            &velocity,
+            &VolumeRatio::default(),
+            &Packing::default(),
+            &mut ps,
+            0.0,
+            &mut Vec::new(),
+        );
         let normal: Vec<Real> = ps.v.iter().map(|v| v.dot(&normal_in).abs()).collect();
         for k in 1..distances.len() {
             assert!(normal[k] <= normal[k - 1] / 5.0, "{cond:?}: |v·n| at d = {:?} h: {normal:?}", distances);
@@ -318,6 +369,7 @@ fn volume_ratio_average_keeps_the_volume_next_to_walls() {
     let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
     let fluid = vec![Material::Fluid(WeaklyCompressibleFluid {
         density_estimate: DensityEstimate::Deformation,
+        relaxation_time: 0.2,
         ..WeaklyCompressibleFluid::dust(1.0)
     })];
     for uniform in [true, false] {
@@ -328,10 +380,10 @@ fn volume_ratio_average_keeps_the_volume_next_to_walls() {
         let volume: Real = ps.vol0.iter().zip(&ps.jp).map(|(v, j)| v * j).sum();
         let mut state = empty_grid(&s);
         let mut ratio = VolumeRatio::new(s.layout.num_nodes());
-        p2g(&t, &fluid, &ps, None, &mut vec![0.0; ps.len()], 1e-3, &mut state, &mut ratio);
+        p2g(&t, &fluid, &ps, None, &mut vec![0.0; ps.len()], 1e-3, &mut state, &mut ratio, &mut Packing::default());
         grid_velocity(&t, &mut state, &Point::zeros(), 1e-3);
         ratio.finish(&s.layout, &s.schedule);
-        g2p(&t, &NoFeet(&s.walls), &fluid, &state.momentum, &ratio, &mut ps, 0.0, &mut Vec::new());
+        g2p(&t, &NoFeet(&s.walls), &fluid, &state.momentum, &ratio, &Packing::default(), &mut ps, 0.0, &mut Vec::new());
         let after: Real = ps.vol0.iter().zip(&ps.jp).map(|(v, j)| v * j).sum();
         assert!((after - volume).abs() < 1e-12 * volume, "total volume {after} vs {volume}");
         if uniform {

@@ -23,6 +23,16 @@ pub enum DensityEstimate {
     /// ρ_p = Σ w_ip m_i / h^D.
     #[schemars(description = "ρ gathered from the particle masses scattered to the regular grid (the paper's)")]
     Grid,
+    /// From the particle's own volume change, relaxed toward how closely the particles pack: ρ = ρ0 / J
+    /// with J̇ = J tr(∇v) and, each step, J ← J + (dt/τ)(min(1/ψ_p, 1) − J), where ψ_p is the particles'
+    /// rest volume per volume of material gathered at the particle from the regular grid (corrected for
+    /// the part of each node's support inside the walls; [`crate::step::packing`]). J then follows the
+    /// packing that the grid's forces act on, so a column at rest keeps both uniform.
+    #[schemars(
+        description = "ρ = ρ0/J from the particle's own volume change, relaxed toward the particles' packing on \
+                       the grid over `relaxation_time`"
+    )]
+    Packing,
 }
 
 /// `p = k((ρ/ρ0)^γ − 1)`, clamped below at `min_pressure`, and
@@ -51,10 +61,18 @@ pub struct WeaklyCompressibleFluid {
     /// Where the density comes from.
     #[serde(default)]
     pub density_estimate: DensityEstimate,
+    /// Time τ over which J relaxes toward the particles' packing (`density_estimate = "packing"` only).
+    #[serde(default = "default_relaxation_time")]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "s"))]
+    pub relaxation_time: Real,
 }
 
 fn default_gamma() -> Real {
     7.0
+}
+
+fn default_relaxation_time() -> Real {
+    0.2
 }
 
 /// With the deformation density, the stress volume of a particle follows its dilation up to this
@@ -72,7 +90,13 @@ impl WeaklyCompressibleFluid {
             viscosity: 0.0,
             min_pressure: 0.0,
             density_estimate: DensityEstimate::Grid,
+            relaxation_time: default_relaxation_time(),
         }
+    }
+
+    /// Whether the density is ρ0/J from the J the particle keeps (`deformation`, `packing`).
+    pub fn keeps_volume_ratio(&self) -> bool {
+        self.density_estimate != DensityEstimate::Grid
     }
 
     /// Pressure (Pa) at density `rho`.
@@ -110,10 +134,7 @@ impl WeaklyCompressibleFluid {
         // μV/(m h²), which then blows up; so V ≤ m/ρ0 with it. J is the particle's own volume
         // change, so with it V follows a dilated fluid (which otherwise feels too little viscous
         // stress) up to `MAX_DILATION` V0, which `stable_dt` accounts for.
-        let floor = match self.density_estimate {
-            DensityEstimate::Grid => self.density,
-            DensityEstimate::Deformation => self.density / MAX_DILATION,
-        };
+        let floor = if self.keeps_volume_ratio() { self.density / MAX_DILATION } else { self.density };
         let volume = p.mass / density.max(floor);
         self.cauchy_stress(density, &p.grad_v) * volume
     }
@@ -134,7 +155,7 @@ impl<const D: usize> ConstitutiveModel<D> for WeaklyCompressibleFluid {
     fn update_deformation(&self, _f: &mut Matrix<D>, jp: &mut Real, grad_v: &Matrix<D>, dt: Real) {
         // F is not needed; with the deformation estimate `jp` holds J, J̇ = J tr(∇v), integrated
         // exactly for the step's constant ∇v (J stays positive however large the step's divergence).
-        if self.density_estimate == DensityEstimate::Deformation {
+        if self.keeps_volume_ratio() {
             *jp *= crate::math::exp_near_zero(dt * grad_v.trace());
         }
     }
@@ -151,9 +172,30 @@ impl<const D: usize> ConstitutiveModel<D> for WeaklyCompressibleFluid {
         self.density_estimate == DensityEstimate::Deformation
     }
 
+    fn keeps_volume_ratio(&self) -> bool {
+        WeaklyCompressibleFluid::keeps_volume_ratio(self)
+    }
+
+    fn packing_relaxation_time(&self) -> Option<Real> {
+        (self.density_estimate == DensityEstimate::Packing).then_some(self.relaxation_time)
+    }
+
+    fn occupied_volume(&self, p: &MaterialPoint<D>, density: Real) -> Real
+    where
+        crate::math::Dim<D>: crate::math::DimOps<D>,
+    {
+        match self.density_estimate {
+            // The rest volume: ψ counts how many particles share the space, whatever their J says.
+            DensityEstimate::Packing => p.vol0,
+            DensityEstimate::Deformation => p.vol0 * p.jp,
+            DensityEstimate::Grid if density > 0.0 => p.mass / density,
+            DensityEstimate::Grid => p.vol0,
+        }
+    }
+
     fn current_density(&self, p: &MaterialPoint<D>) -> Real {
         match self.density_estimate {
-            DensityEstimate::Deformation => self.density / p.jp,
+            DensityEstimate::Deformation | DensityEstimate::Packing => self.density / p.jp,
             DensityEstimate::Grid => p.density,
         }
     }
@@ -166,10 +208,7 @@ impl<const D: usize> ConstitutiveModel<D> for WeaklyCompressibleFluid {
         // Sound speed c² = dp/dρ at rest = kγ/ρ0; viscous diffusion needs ν dt/h² ≤ 1/(2D), with
         // ν = μV/m as large as the stress volume V gets.
         let sound = h / (self.stiffness * self.gamma / self.density).sqrt();
-        let dilation = match self.density_estimate {
-            DensityEstimate::Grid => 1.0,
-            DensityEstimate::Deformation => MAX_DILATION,
-        };
+        let dilation = if self.keeps_volume_ratio() { MAX_DILATION } else { 1.0 };
         let nu = self.viscosity * dilation / self.density;
         let viscous = if nu > 0.0 { h * h / (2.0 * D as Real * nu) } else { Real::INFINITY };
         sound.min(viscous)
@@ -189,6 +228,7 @@ mod tests {
             viscosity: 2.0,
             min_pressure: -100.0,
             density_estimate: DensityEstimate::Grid,
+            relaxation_time: 0.2,
         }
     }
 

@@ -78,6 +78,26 @@ pub trait ConstitutiveModel<const D: usize> {
         false
     }
 
+    /// Whether the model's density is ρ0/J from the J it keeps in `jp` (smoothed or not).
+    fn keeps_volume_ratio(&self) -> bool {
+        false
+    }
+
+    /// τ (s), where the model relaxes its J toward the particles' packing on the grid
+    /// ([`crate::step::packing`]).
+    fn packing_relaxation_time(&self) -> Option<Real> {
+        None
+    }
+
+    /// The volume (m³, or m² in 2D) the point takes up in the packing sums ([`crate::step::packing`]), at the
+    /// density `density` its stress sees: V⁰ det F for a solid.
+    fn occupied_volume(&self, p: &MaterialPoint<D>, _density: Real) -> Real
+    where
+        Dim<D>: DimOps<D>,
+    {
+        p.vol0 * Dim::<D>::det(&p.f)
+    }
+
     /// The density (kg/m³, or kg/m² in 2D) the model's stress sees at this point: the grid
     /// estimate it is handed, unless the model keeps its own.
     fn current_density(&self, p: &MaterialPoint<D>) -> Real {
@@ -195,6 +215,18 @@ where
     }
     fn smooths_volume_ratio(&self) -> bool {
         dispatch!(self, m => ConstitutiveModel::<D>::smooths_volume_ratio(m))
+    }
+    fn keeps_volume_ratio(&self) -> bool {
+        dispatch!(self, m => ConstitutiveModel::<D>::keeps_volume_ratio(m))
+    }
+    fn packing_relaxation_time(&self) -> Option<Real> {
+        dispatch!(self, m => ConstitutiveModel::<D>::packing_relaxation_time(m))
+    }
+    fn occupied_volume(&self, p: &MaterialPoint<D>, density: Real) -> Real
+    where
+        Dim<D>: DimOps<D>,
+    {
+        dispatch!(self, m => ConstitutiveModel::<D>::occupied_volume(m, p, density))
     }
     fn density(&self) -> Real {
         dispatch!(self, m => ConstitutiveModel::<D>::density(m))

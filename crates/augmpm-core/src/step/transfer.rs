@@ -13,6 +13,7 @@ use crate::material::{ConstitutiveModel, Material, MaterialPoint};
 use crate::math::{Dim, DimOps, Matrix, Real, Vector};
 use crate::parallel::{prefetch, task_len, Disjoint, MIN_BLOCKS};
 use crate::particles::Particles;
+use crate::step::packing::{self, Packing};
 use crate::step::schedule::{stencil_in_grid, Reach, Schedule};
 use crate::step::tile::{with_tile, Tile};
 use crate::treatment::augmented::{AugmentedGrid, AugmentedTransfer, WallEntry, WallParticles};
@@ -269,7 +270,9 @@ fn prefetch_particle<const D: usize>(particles: &Particles<D>, p: usize) {
 /// The particles that smooth their J also scatter `(V⁰_p, V⁰_p J_p)` with the B-spline weights to
 /// `volume_ratio` (zero on the active blocks; empty when no material smooths), in the same pass:
 /// [`VolumeRatio::finish`] turns the sums into the nodes' J, which [`g2p`] gathers back. The J-bar
-/// average of this step's J is the one advanced, and the stress of the next step sees it.
+/// average of this step's J is the one advanced, and the stress of the next step sees it. Where a material
+/// relaxes its J toward the packing (`packing` not empty), every particle scatters the volume it occupies
+/// ([`ConstitutiveModel::occupied_volume`]) to `packing`'s sums, in the same pass.
 ///
 /// Away from walls φ = w and g = 4/h² w (x_i − x_p), and the momentum is `w (m v + A (x_i − x_p))`
 /// with one affine matrix `A = m C − 4 dt/h² V σ` per particle (the MLS-MPM form of Hu et al. 2018).
@@ -283,11 +286,13 @@ pub fn p2g<const D: usize>(
     dt: Real,
     grid: &mut GridState<D>,
     volume_ratio: &mut VolumeRatio,
+    packing: &mut Packing,
 ) where
     Dim<D>: DimOps<D>,
 {
     debug_assert!(keeps_f_for_all(particles, materials), "a material keeps F: it must be kept for every particle");
     let layout = t.layout;
+    let packs = !packing.is_empty();
     let (h, inv_h) = (layout.h, 1.0 / layout.h);
     let apic = 4.0 * dt * inv_h * inv_h;
     // The B-spline mass, which only the paper's transfer reads (`grid` keeps it then).
@@ -300,6 +305,7 @@ pub fn p2g<const D: usize>(
         spline: Disjoint::new(&mut grid.spline_mass),
         momentum: Disjoint::new(&mut grid.momentum),
         volume_ratio: Disjoint::new(&mut volume_ratio.nodes),
+        packing: Disjoint::new(&mut packing.nodes),
     };
     // Copies of the arrays' pointers (as in the scatters below), which no grid store can alias.
     let P2gOut { mass, spline, momentum, .. } = out;
@@ -346,6 +352,11 @@ pub fn p2g<const D: usize>(
                 // SAFETY: exclusive as stated above.
                 unsafe { out.scatter_volume(layout, &s, origin, volumes) };
             }
+            if packs {
+                let volume = material.occupied_volume(&point, rho_p);
+                // SAFETY: exclusive as stated above.
+                unsafe { out.scatter_packing(layout, &s, origin, volume) };
+            }
             let (mp, vp, cp) = (particles.mass[p], particles.v[p], particles.c[p]);
             match (t.augmented.and_then(|(g, table)| table.entry(p).map(|e| (g, e))), tile.as_deref_mut()) {
                 (None, Some(tile)) => tile.scatter(reach, &s, h, mp, &(vp * mp), &(cp * mp - stress * apic)),
@@ -362,9 +373,7 @@ pub fn p2g<const D: usize>(
                 }
                 (Some((g, entry @ WallEntry { minv, near, total, tilt, .. })), _) => {
                     let mut force = stress * dt;
-                    if g.transfer == AugmentedTransfer::Stable
-                        && material.smooths_volume_ratio()
-                        && point.jp > SEPARATED
+                    if g.transfer == AugmentedTransfer::Stable && material.keeps_volume_ratio() && point.jp > SEPARATED
                     {
                         force *= lone_particle_stress_scale(minv, total, material, h, dt);
                     }
@@ -431,6 +440,7 @@ struct P2gOut<'a, const D: usize> {
     spline: Disjoint<'a, Real>,
     momentum: Disjoint<'a, Vector<D>>,
     volume_ratio: Disjoint<'a, (Real, Real)>,
+    packing: Disjoint<'a, Real>,
 }
 
 /// What a particle away from walls gives each node of its stencil: with the weight w and `d = x_i − x_p`,
@@ -488,6 +498,20 @@ impl<const D: usize> P2gOut<'_, D> {
                 g.0 += w * v0;
                 g.1 += w * v0j;
             })
+        });
+    }
+
+    /// Scatters `w V_p` (`volume`, the particle's occupied volume) over a particle's stencil to the packing sums.
+    ///
+    /// # Safety
+    /// No other thread writes the stencil's nodes meanwhile.
+    #[inline]
+    unsafe fn scatter_packing(&self, layout: &GridLayout<D>, s: &Stencil<D>, origin: usize, volume: Real) {
+        let packing = self.packing;
+        assert!(last_node(layout, origin) < packing.len());
+        // SAFETY: i ≤ the stencil's last node, in bounds (checked above); exclusive by the caller.
+        s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| unsafe {
+            packing.update_unchecked(i, |v| *v += w * volume)
         });
     }
 }
@@ -632,7 +656,9 @@ impl G2pSum {
 /// J-bar average `Σ_i w_ip J_i` of the nodes' J (`volume_ratio` after [`VolumeRatio::finish`]; empty when
 /// no material smooths), gathered here: in 2D after the velocity, in a loop of its own (in the velocity's
 /// loop G2P took 1.1× as long, measured); in 3D, away from walls, in the velocity's walk by rows
-/// ([`regular_gather_by_rows`]).
+/// ([`regular_gather_by_rows`]). A material that relaxes its J toward the packing then moves the advanced
+/// J toward `1/ψ_p` ([`packing::relax`]), ψ_p gathered from `packing` (after [`Packing::finish`]) at the
+/// particle's stencil of this step.
 /// The impulse each wall gave a particle of the wall table there by the wall fit (or the hold),
 /// `m_p Δv_p` (N·s), goes to `pushes`, one per entry of the table in its order.
 #[allow(clippy::too_many_arguments)]
@@ -642,6 +668,7 @@ pub fn g2p<const D: usize>(
     materials: &[Material],
     velocity: &[Vector<D>],
     volume_ratio: &VolumeRatio,
+    packing: &Packing,
     particles: &mut Particles<D>,
     dt: Real,
     pushes: &mut Vec<WallPush<D>>,
@@ -755,6 +782,12 @@ where
                 unsafe { f.update(p, |fq| fp = *fq) };
             }
             material.update_deformation(&mut fp, jpp, &cn, dt);
+            if let Some(tau) = material.packing_relaxation_time().filter(|_| !packing.is_empty()) {
+                let (s, origin) = stencil(layout, &before, inv_h);
+                if let Some(psi) = packing.at(layout, &s, origin) {
+                    *jpp = packing::relax(*jpp, packing::target_volume_ratio(psi), dt, tau);
+                }
+            }
             if p < f.len() {
                 // SAFETY: as above.
                 unsafe { f.update(p, |fq| *fq = fp) };
@@ -1026,6 +1059,7 @@ mod tests {
             gamma: 7.0,
             viscosity: 1e-3,
             density_estimate: crate::material::DensityEstimate::Deformation,
+            relaxation_time: 0.2,
             ..WeaklyCompressibleFluid::dust(1000.0)
         };
         let materials = vec![Material::Fluid(water)];
@@ -1037,7 +1071,7 @@ mod tests {
             let mut grid = GridState::new(layout.num_nodes(), false);
             let mut ratio = VolumeRatio::new(layout.num_nodes());
             let mut density = vec![0.0; ps.len()];
-            p2g(&t, materials, &ps, None, &mut density, 1e-4, &mut grid, &mut ratio);
+            p2g(&t, materials, &ps, None, &mut density, 1e-4, &mut grid, &mut ratio, &mut Packing::default());
             TILES.with(|t| t.set(false));
             (grid, ratio, density)
         };
@@ -1122,7 +1156,17 @@ mod tests {
         let t = Transfer { layout: &layout, schedule: &schedule, augmented: None };
         let mut grid = GridState::new(layout.num_nodes(), false);
         let mut density = vec![0.0; ps.len()];
-        p2g(&t, &dust(), &ps, None, &mut density, 1e-3, &mut grid, &mut VolumeRatio::default());
+        p2g(
+            &t,
+            &dust(),
+            &ps,
+            None,
+            &mut density,
+            1e-3,
+            &mut grid,
+            &mut VolumeRatio::default(),
+            &mut Packing::default(),
+        );
 
         let mass: f64 = ps.mass.iter().sum();
         let p_particles = ps.momentum();
@@ -1137,7 +1181,17 @@ mod tests {
         grid_velocity(&t, &mut grid, &Vector2::zeros(), 1e-3);
         let before = ps.clone();
         let walls = Walls2::new(vec![], Point::new(1.0, 1.0));
-        let outcome = g2p(&t, &walls, &dust(), &grid.momentum, &VolumeRatio::default(), &mut ps, 0.0, &mut Vec::new());
+        let outcome = g2p(
+            &t,
+            &walls,
+            &dust(),
+            &grid.momentum,
+            &VolumeRatio::default(),
+            &Packing::default(),
+            &mut ps,
+            0.0,
+            &mut Vec::new(),
+        );
         assert_eq!((outcome.held_at_wall, outcome.non_finite, outcome.left_grid), (0, None, None));
         assert_eq!(ps.x, before.x, "dt = 0 leaves positions");
         let p_back = ps.momentum();
@@ -1171,6 +1225,7 @@ mod tests {
         // Stress-free, with its J smoothed.
         let fluid = vec![Material::Fluid(WeaklyCompressibleFluid {
             density_estimate: crate::material::DensityEstimate::Deformation,
+            relaxation_time: 0.2,
             ..WeaklyCompressibleFluid::dust(1.0)
         })];
         for uniform in [true, false] {
@@ -1181,10 +1236,10 @@ mod tests {
             let (before, volume) = (ps.jp.clone(), ps.vol0.iter().zip(&ps.jp).map(|(v, j)| v * j).sum::<f64>());
             let mut grid = GridState::new(layout.num_nodes(), false);
             let mut ratio = VolumeRatio::new(layout.num_nodes());
-            p2g(&t, &fluid, &ps, None, &mut vec![0.0; ps.len()], 1e-3, &mut grid, &mut ratio);
+            p2g(&t, &fluid, &ps, None, &mut vec![0.0; ps.len()], 1e-3, &mut grid, &mut ratio, &mut Packing::default());
             grid_velocity(&t, &mut grid, &Vector2::zeros(), 1e-3);
             ratio.finish(&layout, &schedule);
-            g2p(&t, &walls, &fluid, &grid.momentum, &ratio, &mut ps, 0.0, &mut Vec::new());
+            g2p(&t, &walls, &fluid, &grid.momentum, &ratio, &Packing::default(), &mut ps, 0.0, &mut Vec::new());
             let after: f64 = ps.vol0.iter().zip(&ps.jp).map(|(v, j)| v * j).sum();
             assert!((after - volume).abs() < 1e-12 * volume, "total volume {after} vs {volume}");
             if uniform {
@@ -1285,6 +1340,7 @@ mod tests {
             viscosity: 1.0,
             min_pressure: 0.0,
             density_estimate: crate::material::DensityEstimate::Deformation,
+            relaxation_time: 0.2,
         });
         let stable = ConstitutiveModel::<2>::stable_dt(&water, h);
         let regular = crate::kernel::MlsInverse::<2>::regular(h);
@@ -1311,7 +1367,17 @@ mod tests {
                 let t = Transfer { layout: &layout, schedule: &schedule, augmented: None };
                 let mut grid = GridState::new(layout.num_nodes(), false);
                 let mut density = vec![0.0; ps.len()];
-                p2g(&t, &dust(), &ps, None, &mut density, 1e-3, &mut grid, &mut VolumeRatio::default());
+                p2g(
+                    &t,
+                    &dust(),
+                    &ps,
+                    None,
+                    &mut density,
+                    1e-3,
+                    &mut grid,
+                    &mut VolumeRatio::default(),
+                    &mut Packing::default(),
+                );
                 grid
             })
         };
@@ -1333,6 +1399,16 @@ mod tests {
         let t = Transfer { layout: &layout, schedule: &schedule, augmented: None };
         let mut grid = GridState::new(layout.num_nodes(), false);
         let mut density = vec![0.0; ps.len()];
-        p2g(&t, &dust(), &ps, None, &mut density, 1e-3, &mut grid, &mut VolumeRatio::default());
+        p2g(
+            &t,
+            &dust(),
+            &ps,
+            None,
+            &mut density,
+            1e-3,
+            &mut grid,
+            &mut VolumeRatio::default(),
+            &mut Packing::default(),
+        );
     }
 }
