@@ -3,6 +3,7 @@
 //! Distances are signed and positive on the wall side (outside the material);
 //! normals point from the material into the wall.
 
+use crate::kernel::bspline_integral;
 use crate::math::{Real, Vector};
 use crate::motion::{Motion, Pose, WallPose};
 use crate::wall::BoundaryPoint;
@@ -150,6 +151,9 @@ pub struct Placement<const D: usize> {
     pub turn: [[Real; 3]; 2],
 }
 
+/// Half the width (cells) of the quadratic B-spline's support along an axis.
+pub const SUPPORT_REACH: Real = 1.5;
+
 /// A region the material may occupy, bounded by walls.
 pub trait Region<const D: usize>: Send + Sync {
     fn distance(&self, x: &Vector<D>) -> WallDistance<D>;
@@ -165,6 +169,25 @@ pub trait Region<const D: usize>: Send + Sync {
     /// Whether any wall moves.
     fn moves(&self) -> bool {
         false
+    }
+
+    /// The part of the quadratic B-spline support of a node at `x` that lies inside the material, for cells of
+    /// width `h` (m). Here each wall face within reach cuts the support by a plane: a plane `s` past the node
+    /// leaves `F(−s/h)` of it, F the integral of the spline ([`crate::kernel::bspline_integral`]), and the faces'
+    /// parts multiply. Without a face in reach, the plane at the signed distance.
+    fn support_fraction(&self, x: &Vector<D>, h: Real) -> Real {
+        let d = self.distance(x).distance;
+        if d <= -SUPPORT_REACH * h {
+            return 1.0;
+        }
+        if d >= SUPPORT_REACH * h {
+            return 0.0;
+        }
+        let feet = self.wall_feet(x, SUPPORT_REACH * h);
+        if feet.is_empty() {
+            return bspline_integral(-d / h);
+        }
+        feet.iter().map(|foot| bspline_integral(-(x - foot.x).dot(&foot.normal) / h)).product()
     }
 
     /// Number of walls, the domain box not counted.
@@ -290,6 +313,52 @@ impl Polygon {
             edge_normal
         };
         (if inside { -d } else { d }, normal)
+    }
+
+    /// The part of the quadratic B-spline support of a node at `p` (cells of width `h`, m) that lies inside the
+    /// polygon. Each edge whose segment comes within the support's reach cuts it along its line: `g = F(−s/h)` of
+    /// the support lies on the inner side, `s` the signed distance to the line (positive outside). Inside a
+    /// convex polygon the parts multiply (exact for a box on the grid's axes, whose inside is a product along
+    /// the axes); at a vertex of a polygon that is not convex, two edges multiply at a convex vertex and join,
+    /// `g₁ + g₂ − g₁g₂`, at a reflex one; elsewhere the plane at the signed distance.
+    pub fn support_inside(&self, p: &Point, h: Real) -> Real {
+        const MAX_CUTS: usize = 8;
+        let reach = SUPPORT_REACH * std::f64::consts::SQRT_2 as Real * h;
+        let n = self.vertices.len();
+        let (mut cuts, mut count) = ([(0usize, 0.0 as Real); MAX_CUTS], 0);
+        for (k, (a, b)) in self.edges().enumerate() {
+            let e = b - a;
+            let t = ((p - a).dot(&e) / e.norm_squared()).clamp(0.0, 1.0);
+            if (p - (a + e * t)).norm() <= reach {
+                if count == MAX_CUTS {
+                    return bspline_integral(-self.signed_distance(p).0 / h);
+                }
+                let outward = Point::new(e.y, -e.x).normalize();
+                cuts[count] = (k, bspline_integral(-(p - a).dot(&outward) / h));
+                count += 1;
+            }
+        }
+        let cuts = &cuts[..count];
+        let turn = |k: usize| {
+            // The turn at the vertex where edge k ends: positive at a convex vertex of a counter-clockwise polygon.
+            let (a, b, c) = (self.vertices[k], self.vertices[(k + 1) % n], self.vertices[(k + 2) % n]);
+            let (u, v) = (b - a, c - b);
+            u.x * v.y - u.y * v.x
+        };
+        match cuts {
+            [] => Real::from(u8::from(self.contains(p))),
+            [(_, g)] => *g,
+            _ if (0..n).all(|k| turn(k) >= 0.0) => cuts.iter().map(|(_, g)| g).product(),
+            [(i, gi), (j, gj)] if (i + 1) % n == *j || (j + 1) % n == *i => {
+                let first = if (i + 1) % n == *j { *i } else { *j };
+                if turn(first) >= 0.0 {
+                    gi * gj
+                } else {
+                    gi + gj - gi * gj
+                }
+            }
+            _ => bspline_integral(-self.signed_distance(p).0 / h),
+        }
     }
 
     /// First pair of non-adjacent edges that intersect, if any.
@@ -721,6 +790,34 @@ impl Walls2 {
 }
 
 impl Region<2> for Walls2 {
+    /// The domain box's, the obstacles' and the circles' parts multiply, and the containers' union takes
+    /// `1 − Π(1 − f)` (each wall's cut taken as independent of the others').
+    fn support_fraction(&self, x: &Point, h: Real) -> Real {
+        let mut inside = self.domain_box.support_inside(x, h);
+        let (mut containers, mut outside_all) = (false, 1.0);
+        for wall in &self.walls {
+            match wall {
+                WallShape::Polygon(p) => {
+                    containers = true;
+                    outside_all *= 1.0 - p.support_inside(x, h);
+                }
+                WallShape::Obstacle(p) => inside *= 1.0 - p.support_inside(x, h),
+                WallShape::Stroke(s) => inside *= bspline_integral(s.signed_distance(x).0 / h),
+                WallShape::Circle(c, side) => {
+                    let d = c.signed_distance(x).0;
+                    inside *= bspline_integral(match side {
+                        Side::Inside => -d / h,
+                        Side::Outside => d / h,
+                    });
+                }
+            }
+        }
+        if containers {
+            inside *= 1.0 - outside_all;
+        }
+        inside
+    }
+
     fn outlines(&self) -> Vec<Vec<Point>> {
         self.walls
             .iter()

@@ -171,6 +171,24 @@ pub fn bspline(r: Real) -> Real {
     }
 }
 
+/// `∫_{−∞}^{s} N(u) du` for the quadratic B-spline N ([`bspline`]), `s` in cell widths: the part of a node's
+/// support that lies behind a plane `s` cells past the node, measured along a grid axis.
+pub fn bspline_integral(s: Real) -> Real {
+    let a = s.abs();
+    let below = if a >= 1.5 {
+        0.0
+    } else if a >= 0.5 {
+        (1.5 - a).powi(3) / 6.0
+    } else {
+        0.5 - 0.75 * a + a * a * a / 3.0
+    };
+    if s < 0.0 {
+        below
+    } else {
+        1.0 - below
+    }
+}
+
 /// Tensor-product weight w(d) = Π N(d_k / h) of a point at offset `d` (m).
 #[inline]
 pub fn weight<const D: usize>(d: &Vector<D>, inv_h: Real) -> Real {
