@@ -532,6 +532,40 @@ impl Walls3 {
 }
 
 impl Region<3> for Walls3 {
+    /// Each wall's part multiplies (the material is on the material side of every wall). A box cuts the support
+    /// by its three slabs, `Π_k (F((a_k − u_k)/h) − F((−a_k − u_k)/h))` in its own axes (`u` the node there, `a`
+    /// the half extents; exact for a box along the grid's axes), its complement for an obstacle; any other solid
+    /// by the plane at its signed distance.
+    fn support_fraction(&self, x: &P3, h: Real) -> Real {
+        use crate::kernel::bspline_integral as integral;
+        let mut inside = 1.0;
+        for i in 0..=self.walls.len() {
+            let (solid, side) = if i == self.walls.len() {
+                (&self.domain, Side::Inside)
+            } else {
+                (&self.walls[i].solid, self.walls[i].side)
+            };
+            let part = match solid {
+                Solid::Box { centre, half, axes } => {
+                    let x = self.pose(i).map_or(*x, |p| p.unplace(x));
+                    let u = axes.transpose() * (x - centre);
+                    let slabs: Real =
+                        (0..3).map(|k| integral((half[k] - u[k]) / h) - integral((-half[k] - u[k]) / h)).product();
+                    match side {
+                        Side::Inside => slabs,
+                        Side::Outside => 1.0 - slabs,
+                    }
+                }
+                _ => integral(-self.wall_distance(i)(x).0 / h),
+            };
+            inside *= part;
+            if inside == 0.0 {
+                break;
+            }
+        }
+        inside
+    }
+
     fn distance(&self, x: &P3) -> WallDistance<3> {
         // Intersection of the material sides: the largest signed distance wins.
         self.distance_except(x, None)
