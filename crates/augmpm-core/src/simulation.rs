@@ -530,16 +530,8 @@ impl<const D: usize> Simulation<D>
 where
     Dim<D>: DimOps<D>,
 {
-    pub fn new(model: Model<D>, mut particles: Particles<D>) -> Self {
+    pub fn new(model: Model<D>, particles: Particles<D>) -> Self {
         let density = model.needs_grid_density();
-        if model.relaxes_to_packing() {
-            crate::step::packing::seed_rest_volumes(
-                &model.layout,
-                model.region.as_ref(),
-                &model.materials,
-                &mut particles,
-            );
-        }
         let scratch = Scratch {
             schedule: Schedule::new(&model.layout),
             grid: GridState::new(model.boundary.num_points(&model.layout), model.boundary.reads_spline_mass()),
@@ -562,14 +554,7 @@ where
         if model.region.moves() {
             model.follow_walls(0.0, &[]);
         }
-        if model.relaxes_to_packing() {
-            crate::step::packing::seed_rest_volumes(
-                &model.layout,
-                model.region.as_ref(),
-                &model.materials,
-                &mut particles,
-            );
-        }
+        let mut particles = particles;
         assert!(
             particles.f.is_empty() || particles.f.len() == particles.len(),
             "F has {} entries for {} particles: it is kept for every particle or for none",

@@ -15,10 +15,8 @@
 use crate::geometry::Region;
 use crate::grid::GridLayout;
 use crate::kernel::Stencil;
-use crate::material::{ConstitutiveModel, Material};
-use crate::math::{Dim, DimOps, Real, Vector};
+use crate::math::Real;
 use crate::parallel::Disjoint;
-use crate::particles::Particles;
 use crate::step::schedule::Schedule;
 use crate::step::transfer::MIN_WALL_FRACTION;
 use rayon::prelude::*;
@@ -103,54 +101,6 @@ impl Packing {
         (weight > 0.0).then(|| sum / weight)
     }
 }
-
-/// Gives the particles of the materials that relax toward the packing the rest volume they take up where they
-/// were seeded: `V⁰ ← V⁰/ψ_p` and `m ← m/ψ_p` (ρ0 = m/V⁰ kept), three times over. Seeding on a lattice of
-/// cubes packs a wall that crosses the lattice unevenly (by up to ±15% in the layer next to a turned wall in
-/// 3D), and J = 1 there would otherwise be far from the packing it relaxes toward. The particles are at rest
-/// (their occupied volume is V⁰); serial, in the particles' order.
-pub fn seed_rest_volumes<const D: usize>(
-    layout: &GridLayout<D>,
-    region: &dyn Region<D>,
-    materials: &[Material],
-    particles: &mut Particles<D>,
-) where
-    Dim<D>: DimOps<D>,
-{
-    let relaxes: Vec<bool> = materials.iter().map(|m| m.packing_relaxation_time().is_some()).collect();
-    let mut packing = Packing::new(layout, region);
-    let inv_h = 1.0 / layout.h;
-    let stencil = |x: &Vector<D>| {
-        let s = Stencil::new(x, inv_h);
-        layout.stencil_origin(&s.base).map(|origin| (s, origin))
-    };
-    for _ in 0..SEEDING_PASSES {
-        packing.nodes.fill(0.0);
-        for (x, &v0) in particles.x.iter().zip(&particles.vol0) {
-            if let Some((s, origin)) = stencil(x) {
-                s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| packing.nodes[i] += w * v0);
-            }
-        }
-        let inv_cell = inv_h.powi(D as i32);
-        for (v, &f) in packing.nodes.iter_mut().zip(&packing.fraction) {
-            *v = node_packing(*v, f, inv_cell);
-        }
-        for p in 0..particles.len() {
-            if !relaxes[particles.body[p] as usize] {
-                continue;
-            }
-            if let Some(psi) = stencil(&particles.x[p]).and_then(|(s, origin)| packing.at(layout, &s, origin)) {
-                // The free surface reads a thin packing: there the seeding's volume stands.
-                let scale = 1.0 / psi.max(1.0);
-                particles.vol0[p] *= scale;
-                particles.mass[p] *= scale;
-            }
-        }
-    }
-}
-
-/// How many times [`seed_rest_volumes`] measures the packing and gives the volumes.
-const SEEDING_PASSES: usize = 3;
 
 /// A node's packing from its occupied volume `volume` (m^D) and support fraction `fraction`: `V / (h^D f)`, or −1
 /// (left out) where `f` < [`MIN_WALL_FRACTION`].
@@ -325,14 +275,13 @@ mod tests {
 
     /// In 3D, fluid at rest density (particles h/2 apart, 8 a cell) filling a box turned about a skew axis up to a
     /// level reads a packing of 1 within 0.1% at least 3 h below the surface and 2 h from the walls; next to the
-    /// walls, where the lattice meets them in steps, more than 10% off as seeded, and within 7% once
-    /// `seed_rest_volumes` has given each particle the volume it takes up there (where the steps leave gaps the
-    /// packing reads thin, as at a free surface, and the seeding's volumes stand; the interior then within 0.5%).
+    /// walls, where the lattice meets them in steps, the seeding itself packs unevenly (here by more than 10%:
+    /// what [`MAX_PACKING`] keeps from becoming pressure).
     #[test]
     fn a_turned_box_filled_in_3d_reads_a_packing_of_one() {
         use crate::geometry3::{Solid, Wall3, Walls3};
-        use crate::material::WeaklyCompressibleFluid;
         use crate::math::Matrix;
+        use crate::particles::Particles;
         use crate::step::schedule::Binning;
         use nalgebra::{Rotation3, Unit, Vector3};
         let h = 1.0 / 24.0;
@@ -371,13 +320,6 @@ mod tests {
             (inner, near)
         };
         let (inner, near) = worst(&particles);
-        assert!(inner < 1e-3 && near > 0.1, "as seeded: off by {inner} inside, {near} next to the walls");
-        let water = WeaklyCompressibleFluid {
-            density_estimate: crate::material::DensityEstimate::Packing,
-            ..WeaklyCompressibleFluid::dust(1000.0)
-        };
-        seed_rest_volumes(&layout, &walls, &[Material::Fluid(water)], &mut particles);
-        let (inner, near) = worst(&particles);
-        assert!(inner < 5e-3 && near < 0.07, "with the volumes given: off by {inner} inside, {near} next to the walls");
+        assert!(inner < 1e-3 && near > 0.1, "off by {inner} inside, {near} next to the walls");
     }
 }
