@@ -24,9 +24,10 @@ use rayon::prelude::*;
 /// The packing sums and each node's support fraction; empty when no material relaxes toward the packing.
 #[derive(Clone, Debug, Default)]
 pub struct Packing {
-    /// Per node: in P2G, the particles' occupied volume `Σ_p w_ip V_p` (m^D); after [`Packing::finish`], the
-    /// packing ψ_i (1), or −1 where the node's support lies too little inside the material.
-    pub nodes: Vec<Real>,
+    /// Per node: in P2G, the particles' occupied volume `Σ_p w_ip V_p` (m^D) first; after [`Packing::finish`],
+    /// the packing ψ_i (1) and 1 where the node's support lies inside enough to count, (0, 0) where it does
+    /// not (so that G2P gathers both sums without a branch).
+    pub nodes: Vec<(Real, Real)>,
     /// Per node, the part `f_i` of its B-spline support inside the material ([`Region::support_fraction`]).
     fraction: Vec<Real>,
 }
@@ -38,7 +39,7 @@ impl Packing {
             .into_par_iter()
             .map(|i| region.support_fraction(&layout.position(i), layout.h))
             .collect();
-        Self { nodes: vec![0.0; layout.num_nodes()], fraction }
+        Self { nodes: vec![(0.0, 0.0); layout.num_nodes()], fraction }
     }
 
     pub fn is_empty(&self) -> bool {
@@ -51,12 +52,12 @@ impl Packing {
 
     /// Zeroes the sums on the node `blocks` of `schedule`.
     pub fn clear<const D: usize>(&mut self, layout: &GridLayout<D>, schedule: &Schedule<D>, blocks: &[u32]) {
-        schedule.clear(layout, blocks, &mut self.nodes, 0.0);
+        schedule.clear(layout, blocks, &mut self.nodes, (0.0, 0.0));
     }
 
     /// Zeroes every sum.
     pub fn fill_zero(&mut self) {
-        self.nodes.fill(0.0);
+        self.nodes.fill((0.0, 0.0));
     }
 
     /// The support fractions again on the schedule's active blocks, where the walls of `region` are now
@@ -82,7 +83,7 @@ impl Packing {
         let out = Disjoint::new(&mut self.nodes);
         // SAFETY: node blocks do not overlap, and each active block is listed once.
         schedule.for_each_node_of(layout, schedule.active(), |i| unsafe {
-            out.update(i, |v| *v = node_packing(*v, fraction[i], inv_cell))
+            out.update(i, |v| *v = node_packing(v.0, fraction[i], inv_cell))
         });
     }
 
@@ -91,25 +92,26 @@ impl Packing {
     #[inline]
     pub fn at<const D: usize>(&self, layout: &GridLayout<D>, s: &Stencil<D>, origin: usize) -> Option<Real> {
         let (mut sum, mut weight) = (0.0, 0.0);
+        let nodes = &self.nodes[..];
+        assert!(origin + layout.offset(&[2; D]) < nodes.len());
         s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| {
-            let psi = self.nodes[i];
-            if psi >= 0.0 {
-                sum += w * psi;
-                weight += w;
-            }
+            // SAFETY: i ≤ the stencil's last node, in bounds (checked above).
+            let (psi, counts) = unsafe { *nodes.get_unchecked(i) };
+            sum += w * psi;
+            weight += w * counts;
         });
         (weight > 0.0).then(|| sum / weight)
     }
 }
 
-/// A node's packing from its occupied volume `volume` (m^D) and support fraction `fraction`: `V / (h^D f)`, or −1
-/// (left out) where `f` < [`MIN_WALL_FRACTION`].
+/// A node's packing from its occupied volume `volume` (m^D) and support fraction `fraction`: `(V / (h^D f), 1)`,
+/// or `(0, 0)` (left out) where `f` < [`MIN_WALL_FRACTION`].
 #[inline]
-fn node_packing(volume: Real, fraction: Real, inv_cell: Real) -> Real {
+fn node_packing(volume: Real, fraction: Real, inv_cell: Real) -> (Real, Real) {
     if fraction >= MIN_WALL_FRACTION {
-        volume * inv_cell / fraction
+        (volume * inv_cell / fraction, 1.0)
     } else {
-        -1.0
+        (0.0, 0.0)
     }
 }
 
@@ -252,7 +254,7 @@ mod tests {
                 let stencil = Stencil::new(p, 1.0 / h);
                 let origin = layout.stencil_origin(&stencil.base).unwrap();
                 stencil
-                    .for_each_index(h, origin, layout.strides(), |i, w, _| packing.nodes[i] += w * spacing * spacing);
+                    .for_each_index(h, origin, layout.strides(), |i, w, _| packing.nodes[i].0 += w * spacing * spacing);
             }
             packing.finish(&layout, &schedule);
             let mut worst: Real = 0.0;
@@ -307,7 +309,7 @@ mod tests {
             for (p, v0) in particles.x.iter().zip(&particles.vol0) {
                 let stencil = Stencil::new(p, 1.0 / h);
                 let origin = layout.stencil_origin(&stencil.base).unwrap();
-                stencil.for_each_index(h, origin, layout.strides(), |i, w, _| packing.nodes[i] += w * v0);
+                stencil.for_each_index(h, origin, layout.strides(), |i, w, _| packing.nodes[i].0 += w * v0);
             }
             packing.finish(&layout, &schedule);
             let (mut inner, mut near): (Real, Real) = (0.0, 0.0);

@@ -440,7 +440,7 @@ struct P2gOut<'a, const D: usize> {
     spline: Disjoint<'a, Real>,
     momentum: Disjoint<'a, Vector<D>>,
     volume_ratio: Disjoint<'a, (Real, Real)>,
-    packing: Disjoint<'a, Real>,
+    packing: Disjoint<'a, (Real, Real)>,
 }
 
 /// What a particle away from walls gives each node of its stencil: with the weight w and `d = x_i − x_p`,
@@ -511,7 +511,7 @@ impl<const D: usize> P2gOut<'_, D> {
         assert!(last_node(layout, origin) < packing.len());
         // SAFETY: i ≤ the stencil's last node, in bounds (checked above); exclusive by the caller.
         s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| unsafe {
-            packing.update_unchecked(i, |v| *v += w * volume)
+            packing.update_unchecked(i, |v| v.0 += w * volume)
         });
     }
 }
@@ -700,9 +700,15 @@ where
             let smooths = smoothing && material.smooths_volume_ratio();
             // The J-bar average of the particle's J (P2G scattered it), where it is smoothed.
             let mut jbar = 0.0;
+            // The time its J relaxes over toward the packing, and the packing at its stencil, where it relaxes.
+            let tau = material.packing_relaxation_time().filter(|_| !packing.is_empty());
+            let mut psi = None;
             match t.augmented.and_then(|(g, table)| table.entry(p).map(|e| (g, e))) {
                 None => {
                     let (s, origin) = stencil(layout, xp, inv_h);
+                    if tau.is_some() {
+                        psi = packing.at(layout, &s, origin);
+                    }
                     if D == 3 {
                         let ratio = smooths.then_some(&volume_ratio.nodes[..]);
                         (vn, cn, jbar) = regular_gather_by_rows(layout, &s, origin, velocity, ratio);
@@ -722,9 +728,13 @@ where
                     }
                 }
                 Some((g, entry @ WallEntry { minv, near, tilt, slot, .. })) => {
-                    if smooths {
+                    if smooths || tau.is_some() {
                         let (s, origin) = stencil(layout, xp, inv_h);
-                        jbar = volume_ratio_at(layout, &s, origin, volume_ratio);
+                        if smooths {
+                            jbar = volume_ratio_at(layout, &s, origin, volume_ratio);
+                        } else {
+                            psi = packing.at(layout, &s, origin);
+                        }
                     }
                     let mut push = WallPush::none();
                     g.for_each_near_tilted(layout, xp, near, &tilt, |i, w, d| {
@@ -782,11 +792,8 @@ where
                 unsafe { f.update(p, |fq| fp = *fq) };
             }
             material.update_deformation(&mut fp, jpp, &cn, dt);
-            if let Some(tau) = material.packing_relaxation_time().filter(|_| !packing.is_empty()) {
-                let (s, origin) = stencil(layout, &before, inv_h);
-                if let Some(psi) = packing.at(layout, &s, origin) {
-                    *jpp = packing::relax(*jpp, packing::target_volume_ratio(psi), dt, tau);
-                }
+            if let (Some(tau), Some(psi)) = (tau, psi) {
+                *jpp = packing::relax(*jpp, packing::target_volume_ratio(psi), dt, tau);
             }
             if p < f.len() {
                 // SAFETY: as above.
