@@ -41,8 +41,9 @@ def test_volume_stays_bounded_around_a_sticky_obstacle_turning_in_water_that_tak
         "bodies[0].material.min_pressure": -2e4,
         "bodies[0].material.density_estimate": "packing",
     }
-    sim = Simulation(load_scene("moving/stirred_tank", values=values), "augmented")
-    rest_volume = np.asarray(sim.masses) / 1000.0  # m / ρ0 (m²): Σ m/ρ = Σ (m/ρ0) J
+    scene = load_scene("moving/stirred_tank", values=values)
+    sim = Simulation(scene, "augmented")
+    rest_volume = np.asarray(sim.masses) / scene.bodies[0].material.density  # m / ρ0 (m²): Σ m/ρ = Σ (m/ρ0) J
     start = float(np.sum(rest_volume))
     worst, j_range = 0.0, [1.0, 1.0]
     while sim.time < 3 * 2 * math.pi / 2.0:
@@ -69,6 +70,16 @@ def test_a_run_resumed_from_a_checkpoint_and_on_one_thread_is_bitwise_the_same()
     for other in (two, resumed):
         assert np.array_equal(np.asarray(one.positions), np.asarray(other.positions))
         assert np.array_equal(np.asarray(one.densities), np.asarray(other.densities))
+
+
+def test_a_relaxation_time_without_the_packing_density_is_warned_of_by_name():
+    """`relaxation_time` given to a fluid with another density estimate has no effect: the simulation says so,
+    naming the key; the packing density takes it without a word."""
+    scene = rest.scene(20.0, density_estimate="deformation", relaxation_time=0.5)
+    warnings = Simulation(scene_class(scene).from_dict(scene), "augmented").warnings
+    assert any("bodies[0].material.relaxation_time" in w for w in warnings), warnings
+    scene = packing_scene(relaxation_time=0.5)
+    assert not any("relaxation_time" in w for w in Simulation(scene_class(scene).from_dict(scene)).warnings)
 
 
 @pytest.mark.parametrize("value", [0.0, -1.0])

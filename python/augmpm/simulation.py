@@ -98,7 +98,8 @@ class Simulation:
     def densities(self) -> np.ndarray:
         """Fluid density of each particle in the last step (kg/m² in 2D), shape (N,): ρ0/J with the J its stress
         saw (the one the step before averaged over the grid and advanced) with ``density_estimate =
-        "deformation"``, gathered from the regular grid with ``"grid"``."""
+        "deformation"``, ρ0/J with the J it advanced and relaxed toward the packing with ``"packing"``, gathered
+        from the regular grid with ``"grid"``."""
         return self._sim.densities
 
     def particle_fields(self) -> dict[str, np.ndarray]:

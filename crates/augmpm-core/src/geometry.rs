@@ -248,6 +248,41 @@ pub trait Region<const D: usize>: Send + Sync {
     }
 }
 
+/// The part of a node's support on the inner side of every one of several cuts, each `(g, n)`: the part `g` on
+/// its inner side and its outward unit normal `n`. Cuts along one line keep the smaller part, and cuts facing
+/// each other across a slab keep `max(0, g₁ + g₂ − 1)` (both exact); the groups so formed then join one by one,
+/// each with the group before whose normal is most nearly parallel or opposite to its own, as the bounds for two
+/// correlated cuts do, blended linearly in `ρ = n₁·n₂`: `g₁g₂` for perpendicular normals (exact along the grid's
+/// axes), toward `min(g₁, g₂)` as ρ → 1 and toward `max(0, g₁ + g₂ − 1)` as ρ → −1.
+pub fn intersect_cuts(cuts: impl Iterator<Item = (Real, Point)>) -> Real {
+    const MAX: usize = 8;
+    const PARALLEL: Real = 0.999;
+    // Groups of cuts along one direction: (normal, the part on the inner side of the group's cuts).
+    let (mut groups, mut count) = ([(Point::zeros(), 1.0 as Real); MAX], 0);
+    for (g, n) in cuts {
+        match groups[..count].iter_mut().find(|(m, _)| m.dot(&n).abs() > PARALLEL) {
+            Some((m, inside)) if m.dot(&n) > 0.0 => *inside = inside.min(g),
+            Some((_, inside)) => *inside = (*inside + g - 1.0).max(0.0),
+            None if count < MAX => {
+                groups[count] = (n, g);
+                count += 1;
+            }
+            None => groups[count - 1].1 *= g,
+        }
+    }
+    let mut inside = 1.0;
+    for (k, &(n, g)) in groups[..count].iter().enumerate() {
+        let rho = groups[..k].iter().map(|(m, _)| m.dot(&n)).max_by(|a, b| a.abs().total_cmp(&b.abs()));
+        let independent = inside * g;
+        inside = match rho {
+            None => g,
+            Some(rho) if rho >= 0.0 => independent + rho * (inside.min(g) - independent),
+            Some(rho) => independent - rho * ((inside + g - 1.0).max(0.0) - independent),
+        };
+    }
+    inside
+}
+
 /// A closed polygon given counter-clockwise.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Polygon {
@@ -317,15 +352,15 @@ impl Polygon {
 
     /// The part of the quadratic B-spline support of a node at `p` (cells of width `h`, m) that lies inside the
     /// polygon. Each edge whose segment comes within the support's reach cuts it along its line: `g = F(−s/h)` of
-    /// the support lies on the inner side, `s` the signed distance to the line (positive outside). Inside a
-    /// convex polygon the parts multiply (exact for a box on the grid's axes, whose inside is a product along
-    /// the axes); at a vertex of a polygon that is not convex, two edges multiply at a convex vertex and join,
-    /// `g₁ + g₂ − g₁g₂`, at a reflex one; elsewhere the plane at the signed distance.
+    /// the support lies on the inner side, `s` the signed distance to the line (positive outside). Inside a convex
+    /// polygon the cuts intersect ([`intersect_cuts`]: exact for edges along the grid's axes, and for parallel
+    /// edges on a line or facing each other); at a vertex of a polygon that is not convex, two edges intersect at
+    /// a convex vertex and join at a reflex one; elsewhere the plane at the signed distance.
     pub fn support_inside(&self, p: &Point, h: Real) -> Real {
         const MAX_CUTS: usize = 8;
         let reach = SUPPORT_REACH * std::f64::consts::SQRT_2 as Real * h;
         let n = self.vertices.len();
-        let (mut cuts, mut count) = ([(0usize, 0.0 as Real); MAX_CUTS], 0);
+        let (mut cuts, mut count) = ([(0usize, 0.0 as Real, Point::zeros()); MAX_CUTS], 0);
         for (k, (a, b)) in self.edges().enumerate() {
             let e = b - a;
             let t = ((p - a).dot(&e) / e.norm_squared()).clamp(0.0, 1.0);
@@ -334,7 +369,7 @@ impl Polygon {
                     return bspline_integral(-self.signed_distance(p).0 / h);
                 }
                 let outward = Point::new(e.y, -e.x).normalize();
-                cuts[count] = (k, bspline_integral(-(p - a).dot(&outward) / h));
+                cuts[count] = (k, bspline_integral(-(p - a).dot(&outward) / h), outward);
                 count += 1;
             }
         }
@@ -347,14 +382,15 @@ impl Polygon {
         };
         match cuts {
             [] => Real::from(u8::from(self.contains(p))),
-            [(_, g)] => *g,
-            _ if (0..n).all(|k| turn(k) >= 0.0) => cuts.iter().map(|(_, g)| g).product(),
-            [(i, gi), (j, gj)] if (i + 1) % n == *j || (j + 1) % n == *i => {
+            [(_, g, _)] => *g,
+            _ if (0..n).all(|k| turn(k) >= 0.0) => intersect_cuts(cuts.iter().map(|&(_, g, normal)| (g, normal))),
+            [(i, gi, ni), (j, gj, nj)] if (i + 1) % n == *j || (j + 1) % n == *i => {
                 let first = if (i + 1) % n == *j { *i } else { *j };
                 if turn(first) >= 0.0 {
-                    gi * gj
+                    intersect_cuts([(*gi, *ni), (*gj, *nj)].into_iter())
                 } else {
-                    gi + gj - gi * gj
+                    // The union: what lies outside both, the intersection of the complements, left out.
+                    1.0 - intersect_cuts([(1.0 - gi, -ni), (1.0 - gj, -nj)].into_iter())
                 }
             }
             _ => bspline_integral(-self.signed_distance(p).0 / h),

@@ -1205,6 +1205,7 @@ impl Scene {
         let (dt, warning) = self.dt(model.stable_dt(), fastest, h)?;
         model.dt = dt;
         let mut warnings: Vec<String> = warning.into_iter().collect();
+        warnings.extend(unused_material_keys(self.bodies.iter().map(|b| &b.material)));
         if self.grid.density_wall_correction && model.wall_fraction.is_none() {
             warnings.push(
                 "grid.density_wall_correction has no effect: no fluid gathers its density from the grid \
@@ -1351,4 +1352,15 @@ fn seed_body(
         out.push(p, v, mass, vol0, index as u32);
     }
     Ok(())
+}
+
+/// Warnings for the material keys of the bodies that have no effect (`bodies[i].material.…`), in order.
+pub(crate) fn unused_material_keys<'a>(materials: impl Iterator<Item = &'a Material>) -> Vec<String> {
+    materials
+        .enumerate()
+        .filter_map(|(i, m)| match m {
+            Material::Fluid(f) => f.unused_keys(&format!("bodies[{i}].material")),
+            _ => None,
+        })
+        .collect()
 }

@@ -1071,7 +1071,9 @@ impl Scene3 {
             };
             sim.state.wall_poses.push((body.wall, pose));
         }
-        Ok((sim, warning.into_iter().collect()))
+        let mut warnings: Vec<String> = warning.into_iter().collect();
+        warnings.extend(crate::scene::unused_material_keys(self.bodies.iter().map(|b| &b.material)));
+        Ok((sim, warnings))
     }
 }
 

@@ -744,7 +744,8 @@ where
         let was_moving = self.model.region.moves();
         self.state = state;
         self.failed = None;
-        if was_moving || !self.state.wall_poses.is_empty() {
+        let placed = was_moving || !self.state.wall_poses.is_empty();
+        if placed {
             let seen = self.state.seen_poses(&self.model.bodies);
             self.model.follow_walls(self.state.time, &seen);
             self.scratch.grid.resize(self.model.boundary.num_points(&self.model.layout));
@@ -757,6 +758,10 @@ where
         self.scratch.density_mass.fill(0.0);
         self.scratch.volume_ratio.fill_zero();
         self.scratch.packing.fill_zero();
+        if !self.scratch.packing.is_empty() && placed {
+            // The walls may be back where a region that no longer moves keeps them, which no step places again.
+            self.scratch.packing.place_walls(&self.model.layout, self.model.region.as_ref());
+        }
         Ok(())
     }
 

@@ -155,7 +155,7 @@ fn materials() -> Vec<Material> {
             viscosity: 1.0,
             min_pressure: 0.0,
             density_estimate: DensityEstimate::Deformation,
-            relaxation_time: 0.2,
+            relaxation_time: None,
         }),
     ]
 }

@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from augmpm import _core
-from augmpm.validation.common import METHODS, observed_order
+from augmpm.validation.common import METHODS, SECOND_ORDER, observed_order
 from augmpm.validation.records import Record
 
 CIRCLE = ((0.5, 0.5), 0.25)
@@ -94,5 +94,5 @@ def run(quick: bool, angles: list[float]) -> tuple[list[Record], dict]:
                 records.append(Record(name, method, angle, levels[-1], "max_error_over_h", worst * levels[-1], 1e-8))
             else:
                 order = observed_order([1.0 / n for n in levels], rms)
-                records.append(Record(name, method, angle, levels[-1], "observed_order", order, 2.0, ">="))
+                records.append(Record(name, method, angle, levels[-1], "observed_order", order, SECOND_ORDER, ">="))
     return records, data

@@ -11,7 +11,7 @@ import json
 
 import numpy as np
 
-from augmpm.validation.common import METHODS, observed_order
+from augmpm.validation.common import METHODS, SECOND_ORDER, observed_order
 from augmpm.validation.incline3d import plane_frame
 from augmpm.validation.interpolation import reconstruction_errors
 from augmpm.validation.records import Record
@@ -75,5 +75,5 @@ def run(quick: bool, angles: list[float]) -> tuple[list[Record], dict]:
                 records.append(Record(name, method, angle, levels[-1], "max_error_over_h", worst * levels[-1], 1e-8))
             else:
                 order = observed_order([1.0 / n for n in levels], rms)
-                records.append(Record(name, method, angle, levels[-1], "observed_order", order, 2.0, ">="))
+                records.append(Record(name, method, angle, levels[-1], "observed_order", order, SECOND_ORDER, ">="))
     return records, data

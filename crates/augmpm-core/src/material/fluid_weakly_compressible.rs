@@ -24,10 +24,11 @@ pub enum DensityEstimate {
     #[schemars(description = "ρ gathered from the particle masses scattered to the regular grid (the paper's)")]
     Grid,
     /// From the particle's own volume change, relaxed toward how closely the particles pack: ρ = ρ0 / J
-    /// with J̇ = J tr(∇v) and, each step, J ← J + (dt/τ)(min(1/ψ_p, 1) − J), where ψ_p is the particles'
-    /// rest volume per volume of material gathered at the particle from the regular grid (corrected for
-    /// the part of each node's support inside the walls; [`crate::step::packing`]). J then follows the
-    /// packing that the grid's forces act on, so a column at rest keeps both uniform.
+    /// with J̇ = J tr(∇v) and, each step, J ← J + min(dt/τ, 1)(J* − J), J* = 1/ψ_p between 1/`MAX_PACKING`
+    /// and 1, where ψ_p is the particles' occupied volume per volume of material gathered at the particle
+    /// from the regular grid (corrected for the part of each node's support inside the walls;
+    /// [`crate::step::packing`]). J then follows the packing that the grid's forces act on, so a column at
+    /// rest keeps both uniform.
     #[schemars(
         description = "ρ = ρ0/J from the particle's own volume change, relaxed toward the particles' packing on \
                        the grid over `relaxation_time`"
@@ -61,19 +62,21 @@ pub struct WeaklyCompressibleFluid {
     /// Where the density comes from.
     #[serde(default)]
     pub density_estimate: DensityEstimate,
-    /// Time τ over which J relaxes toward the particles' packing (`density_estimate = "packing"` only).
-    #[serde(default = "default_relaxation_time")]
+    /// Time τ over which J relaxes toward the particles' packing (`density_estimate = "packing"` only; 0.2 s
+    /// when not given).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "s"))]
-    pub relaxation_time: Real,
+    pub relaxation_time: Option<Real>,
 }
 
 fn default_gamma() -> Real {
     7.0
 }
 
-fn default_relaxation_time() -> Real {
-    0.2
-}
+/// τ (s) of `density_estimate = "packing"` when the scene gives none: about the time water 0.3–1 m deep takes
+/// to settle under its viscosity in the validation's tanks, so that the relaxation follows the flow's packing
+/// rather than each step's sampling noise.
+pub const DEFAULT_RELAXATION_TIME: Real = 0.2;
 
 /// With the deformation density, the stress volume of a particle follows its dilation up to this
 /// factor of its rest volume.
@@ -90,8 +93,15 @@ impl WeaklyCompressibleFluid {
             viscosity: 0.0,
             min_pressure: 0.0,
             density_estimate: DensityEstimate::Grid,
-            relaxation_time: default_relaxation_time(),
+            relaxation_time: None,
         }
+    }
+
+    /// The warning for a `relaxation_time` given to a fluid that does not relax toward the packing (`key`: the
+    /// material's dotted key), if it was given so.
+    pub fn unused_keys(&self, key: &str) -> Option<String> {
+        (self.relaxation_time.is_some() && self.density_estimate != DensityEstimate::Packing)
+            .then(|| format!("{key}.relaxation_time has no effect: it applies to density_estimate = \"packing\""))
     }
 
     /// Whether the density is ρ0/J from the J the particle keeps (`deformation`, `packing`).
@@ -153,7 +163,7 @@ impl<const D: usize> ConstitutiveModel<D> for WeaklyCompressibleFluid {
     }
 
     fn update_deformation(&self, _f: &mut Matrix<D>, jp: &mut Real, grad_v: &Matrix<D>, dt: Real) {
-        // F is not needed; with the deformation estimate `jp` holds J, J̇ = J tr(∇v), integrated
+        // F is not needed; with the deformation and packing estimates `jp` holds J, J̇ = J tr(∇v), integrated
         // exactly for the step's constant ∇v (J stays positive however large the step's divergence).
         if self.keeps_volume_ratio() {
             *jp *= crate::math::exp_near_zero(dt * grad_v.trace());
@@ -177,7 +187,8 @@ impl<const D: usize> ConstitutiveModel<D> for WeaklyCompressibleFluid {
     }
 
     fn packing_relaxation_time(&self) -> Option<Real> {
-        (self.density_estimate == DensityEstimate::Packing).then_some(self.relaxation_time)
+        (self.density_estimate == DensityEstimate::Packing)
+            .then(|| self.relaxation_time.unwrap_or(DEFAULT_RELAXATION_TIME))
     }
 
     fn occupied_volume(&self, p: &MaterialPoint<D>, density: Real) -> Real
@@ -228,7 +239,7 @@ mod tests {
             viscosity: 2.0,
             min_pressure: -100.0,
             density_estimate: DensityEstimate::Grid,
-            relaxation_time: 0.2,
+            relaxation_time: None,
         }
     }
 

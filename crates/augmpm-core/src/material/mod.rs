@@ -90,12 +90,12 @@ pub trait ConstitutiveModel<const D: usize> {
     }
 
     /// The volume (m³, or m² in 2D) the point takes up in the packing sums ([`crate::step::packing`]), at the
-    /// density `density` its stress sees: V⁰ det F for a solid.
+    /// density `density` its stress sees: V⁰ det F J_p for a solid (J_p its plastic volume ratio).
     fn occupied_volume(&self, p: &MaterialPoint<D>, _density: Real) -> Real
     where
         Dim<D>: DimOps<D>,
     {
-        p.vol0 * Dim::<D>::det(&p.f)
+        p.vol0 * Dim::<D>::det(&p.f) * p.jp
     }
 
     /// The density (kg/m³, or kg/m² in 2D) the model's stress sees at this point: the grid

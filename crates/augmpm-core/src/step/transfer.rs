@@ -1066,7 +1066,7 @@ mod tests {
             gamma: 7.0,
             viscosity: 1e-3,
             density_estimate: crate::material::DensityEstimate::Deformation,
-            relaxation_time: 0.2,
+            relaxation_time: None,
             ..WeaklyCompressibleFluid::dust(1000.0)
         };
         let materials = vec![Material::Fluid(water)];
@@ -1232,7 +1232,7 @@ mod tests {
         // Stress-free, with its J smoothed.
         let fluid = vec![Material::Fluid(WeaklyCompressibleFluid {
             density_estimate: crate::material::DensityEstimate::Deformation,
-            relaxation_time: 0.2,
+            relaxation_time: None,
             ..WeaklyCompressibleFluid::dust(1.0)
         })];
         for uniform in [true, false] {
@@ -1347,7 +1347,7 @@ mod tests {
             viscosity: 1.0,
             min_pressure: 0.0,
             density_estimate: crate::material::DensityEstimate::Deformation,
-            relaxation_time: 0.2,
+            relaxation_time: None,
         });
         let stable = ConstitutiveModel::<2>::stable_dt(&water, h);
         let regular = crate::kernel::MlsInverse::<2>::regular(h);
