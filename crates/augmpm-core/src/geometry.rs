@@ -151,6 +151,10 @@ pub struct Placement<const D: usize> {
     pub turn: [[Real; 3]; 2],
 }
 
+/// Nodes whose support lies less than this much inside the material are left out of the densities and packings
+/// gathered from the grid.
+pub const MIN_WALL_FRACTION: Real = 0.3;
+
 /// Half the width (cells) of the quadratic B-spline's support along an axis.
 pub const SUPPORT_REACH: Real = 1.5;
 

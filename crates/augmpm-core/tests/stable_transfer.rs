@@ -127,6 +127,17 @@ impl Region<2> for NoFeet<'_> {
 }
 
 /// A zero grid state on the setup's nodes and boundary points (with the B-spline mass where its transfer reads it).
+/// G2P of dust (no stress, no density sums) from the node velocities `velocity` over a step `dt` (s).
+fn g2p_dust(
+    t: &Transfer<'_, 2>,
+    region: &dyn Region<2>,
+    velocity: &[Point],
+    ps: &mut Particles<2>,
+    dt: Real,
+) -> augmpm_core::step::transfer::G2pOutcome {
+    g2p(t, region, &dust(), velocity, &VolumeRatio::default(), &Packing::default(), ps, dt, &mut Vec::new())
+}
+
 fn empty_grid(s: &Setup) -> GridState<2> {
     GridState::new(s.layout.num_nodes() + s.grid.points.len(), s.grid.transfer == AugmentedTransfer::Paper)
 }
@@ -141,29 +152,9 @@ fn round_trip(s: &Setup, ps: &mut Particles<2>, walls_act: bool) -> GridState<2>
     grid_velocity(&t, &mut state, &Point::zeros(), 1e-3);
     if walls_act {
         s.grid.apply(&state.mass, &mut state.momentum, &mut augmpm_core::wall::WallImpulses::zeros(s.grid.walls.len()));
-        g2p(
-            &t,
-            &s.walls,
-            &dust(),
-            &state.momentum,
-            &VolumeRatio::default(),
-            &Packing::default(),
-            ps,
-            0.0,
-            &mut Vec::new(),
-        );
+        g2p_dust(&t, &s.walls, &state.momentum, ps, 0.0);
     } else {
-        g2p(
-            &t,
-            &NoFeet(&s.walls),
-            &dust(),
-            &state.momentum,
-            &VolumeRatio::default(),
-            &Packing::default(),
-            ps,
-            0.0,
-            &mut Vec::new(),
-        );
+        g2p_dust(&t, &NoFeet(&s.walls), &state.momentum, ps, 0.0);
     }
     after_p2g
 }
@@ -242,7 +233,7 @@ proptest! {
         let mut velocity: Vec<Point> = (0..s.layout.num_nodes()).map(|i| field(&s.layout.position(i))).collect();
         velocity.extend(s.grid.points.iter().map(|b| field(&b.x)));
         let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
-        g2p(&t, &s.walls, &dust(), &velocity, &VolumeRatio::default(), &Packing::default(), &mut ps, 0.0, &mut Vec::new());
+        g2p_dust(&t, &s.walls, &velocity, &mut ps, 0.0);
         for p in 0..ps.len() {
             prop_assert!((ps.v[p] - field(&ps.x[p])).norm() <= 1e-10, "v {} vs {}", ps.v[p], field(&ps.x[p]));
             prop_assert!((affine(&s, &ps, p) - gradient).norm() <= 1e-8, "C {} vs {}", affine(&s, &ps, p), gradient);
@@ -303,17 +294,7 @@ fn particles_keep_their_spin_across_a_move() {
             1e-3,
         );
         let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
-        g2p(
-            &t,
-            &NoFeet(&s.walls),
-            &dust(),
-            &state.momentum,
-            &VolumeRatio::default(),
-            &Packing::default(),
-            &mut ps,
-            1e-3,
-            &mut Vec::new(),
-        );
+        g2p_dust(&t, &NoFeet(&s.walls), &state.momentum, &mut ps, 1e-3);
         assert!((own(&ps) - l0).abs() <= 1e-12 * scale, "{angle}°: G2P and the move {} vs {l0}", own(&ps));
         let moved = setup(walls, WallCondition::Sticky, &ps, AugmentedTransfer::Stable);
         let (l1, _) = grid_l(&moved, &ps);
@@ -337,17 +318,7 @@ fn normal_velocity_vanishes_linearly_at_the_wall() {
         let s = setup(walls, cond, &ps, AugmentedTransfer::Stable);
         let velocity = vec![-normal_in; s.layout.num_nodes() + s.grid.points.len()];
         let t = Transfer { layout: &s.layout, schedule: &s.schedule, augmented: Some((&s.grid, &s.table)) };
-        g2p(
-            &t,
-            &s.walls,
-            &dust(),
-            &velocity,
-            &VolumeRatio::default(),
-            &Packing::default(),
-            &mut ps,
-            0.0,
-            &mut Vec::new(),
-        );
+        g2p_dust(&t, &s.walls, &velocity, &mut ps, 0.0);
         let normal: Vec<Real> = ps.v.iter().map(|v| v.dot(&normal_in).abs()).collect();
         for k in 1..distances.len() {
             assert!(normal[k] <= normal[k - 1] / 5.0, "{cond:?}: |v·n| at d = {:?} h: {normal:?}", distances);

@@ -12,13 +12,12 @@
 //! from the packing is a zero-energy mode: the column keeps its weight on a packing gradient while its
 //! pressure gradient fades. J relaxed toward the packing removes that mode.
 
-use crate::geometry::Region;
+use crate::geometry::{Region, MIN_WALL_FRACTION};
 use crate::grid::GridLayout;
 use crate::kernel::Stencil;
 use crate::math::Real;
 use crate::parallel::Disjoint;
 use crate::step::schedule::Schedule;
-use crate::step::transfer::MIN_WALL_FRACTION;
 use rayon::prelude::*;
 
 /// The packing sums and each node's support fraction; empty when no material relaxes toward the packing.

@@ -6,7 +6,7 @@
 //! Particle→grid stages scatter through a [`Schedule`] (coloured blocks, no atomics,
 //! bitwise reproducible for any thread count); grid→particle stages are per particle.
 
-use crate::geometry::Region;
+use crate::geometry::{Region, MIN_WALL_FRACTION};
 use crate::grid::{GridLayout, GridState};
 use crate::kernel::Stencil;
 use crate::material::{ConstitutiveModel, Material, MaterialPoint};
@@ -177,9 +177,6 @@ pub fn density_at<const D: usize>(
         }
     }
 }
-
-/// Nodes whose support lies less than this much inside the material are left out of the density.
-pub const MIN_WALL_FRACTION: Real = 0.3;
 
 /// The fraction of each node's B-spline support inside `region`: ∫ w_i χ dx / h^D, by
 /// sampling the support at h/8 (1 far inside, 0 far outside; computed once, walls are still).
@@ -989,6 +986,17 @@ mod tests {
     }
 
     /// A stress-free material: P2G → G2P must then conserve momentum exactly.
+    /// P2G of dust (no stress, no density sums) at dt = 1 ms.
+    fn p2g_dust(t: &Transfer<'_, 2>, ps: &Particles<2>, grid: &mut GridState<2>) {
+        let mut density = vec![0.0; ps.len()];
+        p2g(t, &dust(), ps, None, &mut density, 1e-3, grid, &mut VolumeRatio::default(), &mut Packing::default());
+    }
+
+    /// G2P of dust from the node velocities `velocity`, with dt = 0 (positions stay).
+    fn g2p_dust(t: &Transfer<'_, 2>, walls: &Walls2, velocity: &[Vector2<f64>], ps: &mut Particles<2>) -> G2pOutcome {
+        g2p(t, walls, &dust(), velocity, &VolumeRatio::default(), &Packing::default(), ps, 0.0, &mut Vec::new())
+    }
+
     fn dust() -> Vec<Material> {
         vec![Material::Fluid(WeaklyCompressibleFluid::dust(1.0))]
     }
@@ -1162,18 +1170,7 @@ mod tests {
         schedule.sort(&layout, &ps.x, &mut Binning::default()).unwrap();
         let t = Transfer { layout: &layout, schedule: &schedule, augmented: None };
         let mut grid = GridState::new(layout.num_nodes(), false);
-        let mut density = vec![0.0; ps.len()];
-        p2g(
-            &t,
-            &dust(),
-            &ps,
-            None,
-            &mut density,
-            1e-3,
-            &mut grid,
-            &mut VolumeRatio::default(),
-            &mut Packing::default(),
-        );
+        p2g_dust(&t, &ps, &mut grid);
 
         let mass: f64 = ps.mass.iter().sum();
         let p_particles = ps.momentum();
@@ -1188,17 +1185,7 @@ mod tests {
         grid_velocity(&t, &mut grid, &Vector2::zeros(), 1e-3);
         let before = ps.clone();
         let walls = Walls2::new(vec![], Point::new(1.0, 1.0));
-        let outcome = g2p(
-            &t,
-            &walls,
-            &dust(),
-            &grid.momentum,
-            &VolumeRatio::default(),
-            &Packing::default(),
-            &mut ps,
-            0.0,
-            &mut Vec::new(),
-        );
+        let outcome = g2p_dust(&t, &walls, &grid.momentum, &mut ps);
         assert_eq!((outcome.held_at_wall, outcome.non_finite, outcome.left_grid), (0, None, None));
         assert_eq!(ps.x, before.x, "dt = 0 leaves positions");
         let p_back = ps.momentum();
@@ -1373,18 +1360,7 @@ mod tests {
                 assert_eq!(schedule.parallel(), threads > 1);
                 let t = Transfer { layout: &layout, schedule: &schedule, augmented: None };
                 let mut grid = GridState::new(layout.num_nodes(), false);
-                let mut density = vec![0.0; ps.len()];
-                p2g(
-                    &t,
-                    &dust(),
-                    &ps,
-                    None,
-                    &mut density,
-                    1e-3,
-                    &mut grid,
-                    &mut VolumeRatio::default(),
-                    &mut Packing::default(),
-                );
+                p2g_dust(&t, &ps, &mut grid);
                 grid
             })
         };
@@ -1405,17 +1381,6 @@ mod tests {
         ps.x[7].x += 12.0 * layout.h; // more than a block (8) plus the slack (2)
         let t = Transfer { layout: &layout, schedule: &schedule, augmented: None };
         let mut grid = GridState::new(layout.num_nodes(), false);
-        let mut density = vec![0.0; ps.len()];
-        p2g(
-            &t,
-            &dust(),
-            &ps,
-            None,
-            &mut density,
-            1e-3,
-            &mut grid,
-            &mut VolumeRatio::default(),
-            &mut Packing::default(),
-        );
+        p2g_dust(&t, &ps, &mut grid);
     }
 }
