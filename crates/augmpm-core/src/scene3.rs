@@ -1148,6 +1148,8 @@ fn seed_body(
     let mut rng = Pcg64::seed_from_u64(seed ^ (index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
     let first = (lo / spacing).map(|c| c.floor() as i64);
     let mut positions = Vec::new();
+    // The points in the body's shape share its volume, those the walls cut off (`fill`) included.
+    let mut in_shape = 0usize;
     for l in 0..cells.z {
         for j in 0..cells.y {
             for i in 0..cells.x {
@@ -1155,8 +1157,11 @@ fn seed_body(
                 // Drawn in f64 in either precision, so that f32 and f64 scenes seed the same particles.
                 let jitter = P3::new(rng.gen::<f64>() as Real, rng.gen::<f64>() as Real, rng.gen::<f64>() as Real);
                 let p = corner + jitter * spacing;
-                if solid.signed_distance(&p).0 < 0.0 && !(body.fill && region.distance(&p).distance > 0.0) {
-                    positions.push(p);
+                if solid.signed_distance(&p).0 < 0.0 {
+                    in_shape += 1;
+                    if !(body.fill && region.distance(&p).distance > 0.0) {
+                        positions.push(p);
+                    }
                 }
             }
         }
@@ -1167,7 +1172,7 @@ fn seed_body(
             format!("no particle was seeded (the body is smaller than the seeding spacing {spacing} m, or outside the walls)"),
         ));
     }
-    let n = positions.len() as Real;
+    let n = in_shape as Real;
     let density = ConstitutiveModel::<3>::density(&body.material);
     let (mass, vol0) = (volume * density / n, volume / n);
     let v = p3(&body.velocity);
