@@ -23,15 +23,17 @@ pub enum DensityEstimate {
     /// ρ_p = Σ w_ip m_i / h^D.
     #[schemars(description = "ρ gathered from the particle masses scattered to the regular grid (the paper's)")]
     Grid,
-    /// From the particle's own volume change, relaxed toward how closely the particles pack: ρ = ρ0 / J
-    /// with J̇ = J tr(∇v) and, each step, J ← J + min(dt/τ, 1)(J* − J), J* = 1/ψ_p between 1/`MAX_PACKING`
-    /// and 1, where ψ_p is the particles' occupied volume per volume of material gathered at the particle
-    /// from the regular grid (corrected for the part of each node's support inside the walls;
-    /// [`crate::step::packing`]). J then follows the packing that the grid's forces act on, so a column at
-    /// rest keeps both uniform.
+    /// From the particle's own volume change, smoothed and relaxed toward how closely the particles pack:
+    /// ρ = ρ0 / J with J̇ = J tr(∇v) and, each step, J ← J̄ + min(dt/τ, 1)(J* − J̄). J̄ is a J-bar average
+    /// that keeps a linearly varying J (fitted on the grid as a value and a gradient per node), and
+    /// J* = 1/ψ_p within 10% of 1 (where ψ_p is thinner, a free surface, J* keeps J within [1, 1/ψ_p]).
+    /// ψ_p is the particles' occupied volume per volume of material gathered at the particle from the
+    /// regular grid (corrected for the part of each node's support inside the walls;
+    /// [`crate::step::packing`]). J then follows the packing that the grid's forces act on, so a column
+    /// at rest keeps both uniform.
     #[schemars(
-        description = "ρ = ρ0/J from the particle's own volume change, relaxed toward the particles' packing on \
-                       the grid over `relaxation_time`"
+        description = "ρ = ρ0/J from the particle's own volume change, smoothed by a J-bar that keeps a linear J \
+                       and relaxed toward the particles' packing on the grid over `relaxation_time`"
     )]
     Packing,
 }
@@ -62,7 +64,7 @@ pub struct WeaklyCompressibleFluid {
     /// Where the density comes from.
     #[serde(default)]
     pub density_estimate: DensityEstimate,
-    /// Time τ over which J relaxes toward the particles' packing (`density_estimate = "packing"` only; 0.2 s
+    /// Time τ over which J relaxes toward the particles' packing (`density_estimate = "packing"` only; 0.05 s
     /// when not given).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[schemars(extend("exclusiveMinimum" = 0.0, "unit" = "s"))]
@@ -76,7 +78,7 @@ fn default_gamma() -> Real {
 /// τ (s) of `density_estimate = "packing"` when the scene gives none: about the time water 0.3–1 m deep takes
 /// to settle under its viscosity in the validation's tanks, so that the relaxation follows the flow's packing
 /// rather than each step's sampling noise.
-pub const DEFAULT_RELAXATION_TIME: Real = 0.2;
+pub const DEFAULT_RELAXATION_TIME: Real = 0.05;
 
 /// With the deformation density, the stress volume of a particle follows its dilation up to this
 /// factor of its rest volume.

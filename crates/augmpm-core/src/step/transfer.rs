@@ -351,8 +351,9 @@ pub fn p2g<const D: usize>(
             }
             if packs {
                 let volume = material.occupied_volume(&point, rho_p);
+                let rest = if material.packing_relaxation_time().is_some() { particles.vol0[p] } else { 0.0 };
                 // SAFETY: exclusive as stated above.
-                unsafe { out.scatter_packing(layout, &s, origin, volume) };
+                unsafe { out.scatter_packing(layout, &s, origin, [volume, rest, rest * particles.jp[p]]) };
             }
             let (mp, vp, cp) = (particles.mass[p], particles.v[p], particles.c[p]);
             match (t.augmented.and_then(|(g, table)| table.entry(p).map(|e| (g, e))), tile.as_deref_mut()) {
@@ -437,7 +438,7 @@ struct P2gOut<'a, const D: usize> {
     spline: Disjoint<'a, Real>,
     momentum: Disjoint<'a, Vector<D>>,
     volume_ratio: Disjoint<'a, (Real, Real)>,
-    packing: Disjoint<'a, (Real, Real)>,
+    packing: Disjoint<'a, [Real; 6]>,
 }
 
 /// What a particle away from walls gives each node of its stencil: with the weight w and `d = x_i − x_p`,
@@ -498,17 +499,27 @@ impl<const D: usize> P2gOut<'_, D> {
         });
     }
 
-    /// Scatters `w V_p` (`volume`, the particle's occupied volume) over a particle's stencil to the packing sums.
+    /// Scatters `w [V_p, V⁰_p, V⁰_p J_p, V⁰_p (x_p − x_i)]` over a particle's stencil to the packing sums:
+    /// `sums` holds the particle's occupied volume, and its rest volume and volume where it relaxes toward the
+    /// packing (else zeros, and so is the centroid's sum).
     ///
     /// # Safety
     /// No other thread writes the stencil's nodes meanwhile.
     #[inline]
-    unsafe fn scatter_packing(&self, layout: &GridLayout<D>, s: &Stencil<D>, origin: usize, volume: Real) {
+    unsafe fn scatter_packing(&self, layout: &GridLayout<D>, s: &Stencil<D>, origin: usize, sums: [Real; 3]) {
+        let rest = sums[1];
         let packing = self.packing;
         assert!(last_node(layout, origin) < packing.len());
         // SAFETY: i ≤ the stencil's last node, in bounds (checked above); exclusive by the caller.
-        s.for_each_index(layout.h, origin, layout.strides(), |i, w, _| unsafe {
-            packing.update_unchecked(i, |v| v.0 += w * volume)
+        s.for_each_index(layout.h, origin, layout.strides(), |i, w, d| unsafe {
+            packing.update_unchecked(i, |v| {
+                v[0] += w * sums[0];
+                v[1] += w * sums[1];
+                v[2] += w * sums[2];
+                for k in 0..D {
+                    v[3 + k] -= w * rest * d[k];
+                }
+            })
         });
     }
 }
@@ -653,9 +664,9 @@ impl G2pSum {
 /// J-bar average `Σ_i w_ip J_i` of the nodes' J (`volume_ratio` after [`VolumeRatio::finish`]; empty when
 /// no material smooths), gathered here: in 2D after the velocity, in a loop of its own (in the velocity's
 /// loop G2P took 1.1× as long, measured); in 3D, away from walls, in the velocity's walk by rows
-/// ([`regular_gather_by_rows`]). A material that relaxes its J toward the packing then moves the advanced
-/// J toward `1/ψ_p` ([`packing::relax`]), ψ_p gathered from `packing` (after [`Packing::finish`]) at the
-/// particle's stencil of this step.
+/// ([`regular_gather_by_rows`]). A material that relaxes its J toward the packing starts from the J-bar
+/// that keeps a linear J, moved toward `1/ψ_p` ([`packing::relax`]), both gathered from `packing` (after
+/// [`Packing::finish`]) at the particle's stencil of this step, and advances that.
 /// The impulse each wall gave a particle of the wall table there by the wall fit (or the hold),
 /// `m_p Δv_p` (N·s), goes to `pushes`, one per entry of the table in its order.
 #[allow(clippy::too_many_arguments)]
@@ -778,6 +789,9 @@ where
             if smooths {
                 *jpp = jbar;
             }
+            if let (Some(tau), Some((psi, linear_jbar))) = (tau, psi) {
+                *jpp = packing::relax(linear_jbar, packing::target_volume_ratio(psi, linear_jbar), dt, tau);
+            }
             // `a · 0` is ±0 for a finite `a` and NaN otherwise, so the sum is ±0 exactly when all are finite
             // (no branch per value). F counts where it is kept (elsewhere it is I). The particle's kinetic
             // energy must be representable too, or the run's energy is garbage.
@@ -789,9 +803,6 @@ where
                 unsafe { f.update(p, |fq| fp = *fq) };
             }
             material.update_deformation(&mut fp, jpp, &cn, dt);
-            if let (Some(tau), Some(psi)) = (tau, psi) {
-                *jpp = packing::relax(*jpp, packing::target_volume_ratio(psi), dt, tau);
-            }
             if p < f.len() {
                 // SAFETY: as above.
                 unsafe { f.update(p, |fq| *fq = fp) };
