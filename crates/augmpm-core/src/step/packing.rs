@@ -17,10 +17,9 @@
 //!
 //! Each step the particle's J is that average moved toward `1/ψ_p` over `relaxation_time`
 //! ([`target_volume_ratio`]: within 10% of 1; a free surface or spray reads a thinner packing, and there the
-//! pressure is zero anyway). The grid's forces weigh each
-//! particle's pressure by how closely the particles pack, so a J that drifts from the packing is a zero-energy
-//! mode: the column keeps its weight on a packing gradient while its pressure gradient fades. J relaxed toward
-//! the packing removes that mode.
+//! pressure is zero anyway). The grid's forces weigh each particle's pressure by how closely the particles
+//! pack, so a J that drifts from the packing is a zero-energy mode: the column keeps its weight on a packing
+//! gradient while its pressure gradient fades. J relaxed toward the packing removes that mode.
 
 use crate::geometry::{Region, MIN_WALL_FRACTION};
 use crate::grid::GridLayout;
@@ -115,7 +114,7 @@ impl Packing {
         let out = Disjoint::new(&mut self.fit);
         // SAFETY: as above.
         schedule.for_each_node_of(layout, schedule.active(), |i| unsafe {
-            out.update(i, |v| *v = node_fit::<D>(nodes, i, &strides, h))
+            out.update(i, |v| *v = node_fit::<D>(nodes, i, &strides, &layout.dims, h))
         });
     }
 
@@ -162,9 +161,15 @@ fn node_packing<const D: usize>(sums: [Real; 6], fraction: Real, inv_cell: Real)
 }
 
 /// Node `i`'s J as a linear field, `[J_i, g (3)]`: the gradient g (1/m) fitted by weighted least squares to the
-/// centroid values of the node and its neighbours along the axes (each weighed by its `m`), and `J_i = J_c − g·c`;
-/// zeros where the node does not count.
-fn node_fit<const D: usize>(nodes: &[[Real; 6]], i: usize, strides: &[usize; D], h: Real) -> [Real; 4] {
+/// centroid values of the node and its neighbours along the axes (each weighted by its `m`), and
+/// `J_i = J_c − g·c`; zeros where the node does not count. `strides` and `dims` are the grid's.
+fn node_fit<const D: usize>(
+    nodes: &[[Real; 6]],
+    i: usize,
+    strides: &[usize; D],
+    dims: &[usize; D],
+    h: Real,
+) -> [Real; 4] {
     let v = nodes[i];
     if v[5] <= 0.0 {
         return [0.0; 4];
@@ -173,9 +178,13 @@ fn node_fit<const D: usize>(nodes: &[[Real; 6]], i: usize, strides: &[usize; D],
     let mut b = [0.0; 3];
     let mut total = 0.0;
     for k in 0..D {
+        let at = (i / strides[k]) % dims[k];
         for side in [-1isize, 1] {
-            let j = i as isize + side * strides[k] as isize;
-            let Some(u) = usize::try_from(j).ok().and_then(|j| nodes.get(j)) else { continue };
+            // The grid's first and last nodes along the axis have no neighbour beyond them.
+            if (side < 0 && at == 0) || (side > 0 && at + 1 == dims[k]) {
+                continue;
+            }
+            let u = &nodes[(i as isize + side * strides[k] as isize) as usize];
             if u[5] <= 0.0 {
                 continue;
             }
