@@ -790,7 +790,9 @@ where
                 *jpp = jbar;
             }
             if let (Some(tau), Some((psi, linear_jbar))) = (tau, psi) {
-                *jpp = packing::relax(linear_jbar, packing::target_volume_ratio(psi, linear_jbar), dt, tau);
+                // The linear J-bar extrapolates a gradient; where that leaves no volume, the particle's own J.
+                let from = if linear_jbar > 0.0 { linear_jbar } else { *jpp };
+                *jpp = packing::relax(from, packing::target_volume_ratio(psi, from), dt, tau);
             }
             // `a · 0` is ±0 for a finite `a` and NaN otherwise, so the sum is ±0 exactly when all are finite
             // (no branch per value). F counts where it is kept (elsewhere it is I). The particle's kinetic
