@@ -397,27 +397,9 @@ mod tests {
     /// relaxes toward 1/ψ.
     #[test]
     fn a_tank_filled_at_rest_density_reads_a_packing_of_one() {
-        use crate::step::schedule::Binning;
         let h = 1.0 / 48.0;
-        let layout = GridLayout::<2>::new(h, [48, 48]);
         for (angle, tolerance) in [(0.0_f64, 0.01), (20.0, 0.01)] {
-            let (c, s) = (angle.to_radians().cos() as Real, angle.to_radians().sin() as Real);
-            let corners = [(-0.375, -0.375), (0.375, -0.375), (0.375, 0.375), (-0.375, 0.375)]
-                .map(|(x, y): (Real, Real)| Point::new(0.5 + c * x - s * y, 0.5 + s * x + c * y));
-            let walls = Walls2::new(vec![WallShape::Polygon(Polygon::new(corners.to_vec()))], Point::new(1.0, 1.0));
-            let level = corners.iter().map(|p| p.y).fold(Real::INFINITY, Real::min) + 0.3;
-            let spacing = h / 2.0;
-            let x: Vec<Point> = (0..96 * 96)
-                .map(|k| Point::new((k % 96) as Real + 0.5, (k / 96) as Real + 0.5) * spacing)
-                .filter(|p| p.y < level && walls.distance(p).distance < 0.0)
-                .collect();
-            let mut schedule = Schedule::new(&layout);
-            schedule.sort(&layout, &x, &mut Binning::default()).unwrap();
-            let mut packing = Packing::new(&layout, &walls);
-            for p in &x {
-                scatter(&mut packing, &layout, p, spacing * spacing, 1.0);
-            }
-            packing.finish(&layout, &schedule);
+            let (layout, walls, level, x, packing) = water_in_a_turned_tank(angle, |_| 1.0);
             let mut worst: Real = 0.0;
             // Turned, the lattice meets the walls in steps that pack the wall layer unevenly (by ±5%): there the
             // particles from 2 h off the walls count.
@@ -437,6 +419,36 @@ mod tests {
         assert_eq!(target_volume_ratio(0.5, 2.5), MAX_PACKING);
         assert!((relax(1.0, 0.8, 0.01, 0.2) - 0.99).abs() < 1e-15);
         assert_eq!(relax(1.0, 0.8, 0.5, 0.2), 0.8);
+    }
+
+    /// Water 0.3 m deep at rest (particles h/2 apart, 48 cells on 1 m) in a square tank 0.75 m wide turned
+    /// `angle` (°) about the domain's centre, each particle at the volume ratio `j(depth)`, scattered and
+    /// finished: the grid, the walls, the level (m), the particles and their packing.
+    fn water_in_a_turned_tank(
+        angle: f64,
+        j: impl Fn(Real) -> Real,
+    ) -> (GridLayout<2>, Walls2, Real, Vec<Point>, Packing) {
+        use crate::step::schedule::Binning;
+        let h = 1.0 / 48.0;
+        let layout = GridLayout::<2>::new(h, [48, 48]);
+        let (c, s) = (angle.to_radians().cos() as Real, angle.to_radians().sin() as Real);
+        let corners = [(-0.375, -0.375), (0.375, -0.375), (0.375, 0.375), (-0.375, 0.375)]
+            .map(|(x, y): (Real, Real)| Point::new(0.5 + c * x - s * y, 0.5 + s * x + c * y));
+        let walls = Walls2::new(vec![WallShape::Polygon(Polygon::new(corners.to_vec()))], Point::new(1.0, 1.0));
+        let level = corners.iter().map(|p| p.y).fold(Real::INFINITY, Real::min) + 0.3;
+        let spacing = h / 2.0;
+        let x: Vec<Point> = (0..96 * 96)
+            .map(|k| Point::new((k % 96) as Real + 0.5, (k / 96) as Real + 0.5) * spacing)
+            .filter(|p| p.y < level && walls.distance(p).distance < 0.0)
+            .collect();
+        let mut schedule = Schedule::new(&layout);
+        schedule.sort(&layout, &x, &mut Binning::default()).unwrap();
+        let mut packing = Packing::new(&layout, &walls);
+        for p in &x {
+            scatter(&mut packing, &layout, p, spacing * spacing, j(level - p.y));
+        }
+        packing.finish(&layout, &schedule);
+        (layout, walls, level, x, packing)
     }
 
     /// Scatters a relaxing fluid's particle at `x` of rest volume `v0` and volume ratio `j` as P2G does.
@@ -468,34 +480,16 @@ mod tests {
     /// included), within 20% next to them.
     #[test]
     fn a_linear_j_is_gathered_unchanged_up_to_the_walls_and_the_surface() {
-        use crate::step::schedule::Binning;
         let h = 1.0 / 48.0;
-        let layout = GridLayout::<2>::new(h, [48, 48]);
-        let (c, s) = (20.0_f64.to_radians().cos() as Real, 20.0_f64.to_radians().sin() as Real);
-        let corners = [(-0.375, -0.375), (0.375, -0.375), (0.375, 0.375), (-0.375, 0.375)]
-            .map(|(x, y): (Real, Real)| Point::new(0.5 + c * x - s * y, 0.5 + s * x + c * y));
-        let walls = Walls2::new(vec![WallShape::Polygon(Polygon::new(corners.to_vec()))], Point::new(1.0, 1.0));
-        let level = corners.iter().map(|p| p.y).fold(Real::INFINITY, Real::min) + 0.3;
         let per_cell = 1e-3;
-        let j_at = |p: &Point| 1.0 - per_cell * (level - p.y) / h;
-        let spacing = h / 2.0;
-        let x: Vec<Point> = (0..96 * 96)
-            .map(|k| Point::new((k % 96) as Real + 0.5, (k / 96) as Real + 0.5) * spacing)
-            .filter(|p| p.y < level && walls.distance(p).distance < 0.0)
-            .collect();
-        let mut schedule = Schedule::new(&layout);
-        schedule.sort(&layout, &x, &mut Binning::default()).unwrap();
-        let mut packing = Packing::new(&layout, &walls);
-        for p in &x {
-            scatter(&mut packing, &layout, p, spacing * spacing, j_at(p));
-        }
-        packing.finish(&layout, &schedule);
+        let j_at = |depth: Real| 1.0 - per_cell * depth / h;
+        let (layout, walls, level, x, packing) = water_in_a_turned_tank(20.0, j_at);
         let (mut walls_worst, mut worst): (Real, Real) = (0.0, 0.0);
         for p in &x {
             let stencil = Stencil::new(p, 1.0 / h);
             let (_, j) = packing.at(&layout, &stencil, layout.stencil_origin(&stencil.base).unwrap()).unwrap();
             let off = if walls.distance(p).distance < -h { &mut worst } else { &mut walls_worst };
-            *off = off.max((j - j_at(p)).abs() / per_cell);
+            *off = off.max((j - j_at(level - p.y)).abs() / per_cell);
         }
         // Away from the walls the fit is exact but for its ridge, which takes about 2% off the gradient. Within
         // h of a wall, a node whose neighbours lie along one side only is fitted less well: 0.19 of a cell's
