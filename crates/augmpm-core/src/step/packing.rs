@@ -32,31 +32,29 @@ use rayon::prelude::*;
 /// The packing sums and each node's support fraction; empty when no material relaxes toward the packing.
 #[derive(Clone, Debug, Default)]
 pub struct Packing {
-    /// Per node: in P2G, the particles' occupied volume `Σ_p w_ip V_p` (m^D), and the relaxing fluids'
-    /// `Σ w V⁰` (m^D), `Σ w V⁰ J` (m^D) and `Σ w V⁰ (x_p − x_i)` (m^(D+1), D entries); after
-    /// [`Packing::finish`], the packing ψ_i (1), the fluids' mean J at their centroid (1), the centroid's offset
-    /// from the node (m, D entries) and their weight `Σ w V⁰` (m^D, 0 where the node does not count).
+    /// Per node, P2G's sums: the particles' occupied volume `Σ_p w_ip V_p` (m^D), and the relaxing fluids'
+    /// `Σ w V⁰` (m^D), `Σ w V⁰ J` (m^D) and `Σ w V⁰ (x_p − x_i)` (m^(D+1), D entries).
     pub nodes: Vec<[Real; 6]>,
-    /// Per node, after [`Packing::finish`]: the relaxing fluids' J as a linear field, `[J_i, ∇J (3)]` (1, 1/m).
-    fit: Vec<[Real; 4]>,
-    /// Per node, the part `f_i` of its B-spline support inside the material ([`Region::support_fraction`]).
-    fraction: Vec<Real>,
+    /// Per node, after [`Packing::finish`], D + 2 values in a row: the packing ψ_i (1) and the relaxing fluids' J
+    /// as a linear field, `J_i` (1) and `∇J` (1/m, D entries); all zero where the node does not count. One
+    /// compact row is what G2P reads for each node of a particle's stencil.
+    field: Vec<Real>,
+    /// Per node, `1 / (h^D f_i)` (1/m^D) with `f_i` the part of its B-spline support inside the material
+    /// ([`Region::support_fraction`]); 0 where `f_i` < [`MIN_WALL_FRACTION`], a node that does not count.
+    per_volume: Vec<Real>,
 }
 
 impl Packing {
     /// Zero sums on every node of `layout`, and the support fractions of the walls as `region` places them.
     pub fn new<const D: usize>(layout: &GridLayout<D>, region: &dyn Region<D>) -> Self {
-        let mut packing = Self { nodes: vec![[0.0; 6]; layout.num_nodes()], fit: Vec::new(), fraction: Vec::new() };
+        let mut packing = Self { nodes: vec![[0.0; 6]; layout.num_nodes()], field: Vec::new(), per_volume: Vec::new() };
         packing.place_walls(layout, region);
         packing
     }
 
     /// Every node's support fraction where the walls of `region` are now (a restored state puts them back).
     pub fn place_walls<const D: usize>(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>) {
-        self.fraction = (0..layout.num_nodes())
-            .into_par_iter()
-            .map(|i| region.support_fraction(&layout.position(i), layout.h))
-            .collect();
+        self.per_volume = (0..layout.num_nodes()).into_par_iter().map(|i| per_volume(layout, region, i)).collect();
     }
 
     pub fn is_empty(&self) -> bool {
@@ -65,8 +63,8 @@ impl Packing {
 
     pub fn heap_bytes(&self) -> usize {
         crate::math::heap_bytes(&self.nodes)
-            + crate::math::heap_bytes(&self.fit)
-            + crate::math::heap_bytes(&self.fraction)
+            + crate::math::heap_bytes(&self.field)
+            + crate::math::heap_bytes(&self.per_volume)
     }
 
     /// Zeroes the sums on the node `blocks` of `schedule`.
@@ -87,34 +85,31 @@ impl Packing {
         schedule: &Schedule<D>,
         region: &dyn Region<D>,
     ) {
-        let out = Disjoint::new(&mut self.fraction);
+        let out = Disjoint::new(&mut self.per_volume);
         // SAFETY: node blocks do not overlap, and each active block is listed once.
         schedule.for_each_node_of(layout, schedule.active(), |i| unsafe {
-            out.update(i, |f| *f = region.support_fraction(&layout.position(i), layout.h))
+            out.update(i, |f| *f = per_volume(layout, region, i))
         });
     }
 
     /// The nodes' packing ψ_i = `Σ w V / (h^D f_i)` and the relaxing fluids' J as a linear field (value and
     /// gradient) on the schedule's active blocks (in the grid stage, after P2G); zeros where `f_i` <
     /// [`MIN_WALL_FRACTION`] or no relaxing fluid reaches the node.
+    ///
+    /// The J of each node's particles is the J at their centroid; the gradient fitted over the node and its
+    /// neighbours along the axes moves it to the node, so that a linear J (a column at rest) is kept. One pass
+    /// reads the sums of the node and its neighbours.
     pub fn finish<const D: usize>(&mut self, layout: &GridLayout<D>, schedule: &Schedule<D>) {
-        let inv_cell = layout.h.powi(-(D as i32));
-        let fraction = &self.fraction;
-        let out = Disjoint::new(&mut self.nodes);
-        // SAFETY: node blocks do not overlap, and each active block is listed once.
-        schedule.for_each_node_of(layout, schedule.active(), |i| unsafe {
-            out.update(i, |v| *v = node_packing::<D>(*v, fraction[i], inv_cell))
-        });
-        // The J of each node's particles is the J at their centroid; the gradient fitted over the node and its
-        // neighbours along the axes moves it to the node, so that a linear J (a column at rest) is kept.
-        self.fit.resize(self.nodes.len(), [0.0; 4]);
-        let nodes = &self.nodes;
-        let strides = *layout.strides();
-        let h = layout.h;
-        let out = Disjoint::new(&mut self.fit);
-        // SAFETY: as above.
-        schedule.for_each_node_of(layout, schedule.active(), |i| unsafe {
-            out.update(i, |v| *v = node_fit::<D>(nodes, i, &strides, &layout.dims, h))
+        self.field.resize(self.nodes.len() * (D + 2), 0.0);
+        let nodes = Sums { nodes: &self.nodes, per_volume: &self.per_volume };
+        let (strides, h) = (*layout.strides(), layout.h);
+        let field = Disjoint::new(&mut self.field);
+        // SAFETY: node blocks do not overlap, and each active block is listed once; node i writes its own row.
+        schedule.for_each_node_of_at(layout, schedule.active(), |i, at| {
+            let row = node_field::<D>(&nodes, i, at, &strides, &layout.dims, h);
+            for (k, &value) in row.iter().take(D + 2).enumerate() {
+                unsafe { field.update(i * (D + 2) + k, |v| *v = value) };
+            }
         });
     }
 
@@ -122,78 +117,128 @@ impl Packing {
     /// `(Σ w ψ_i / Σ w, Σ w (J_i + g_i·(x_p − x_i)) / Σ w)` over the nodes that count, or `None` when none does.
     #[inline]
     pub fn at<const D: usize>(&self, layout: &GridLayout<D>, s: &Stencil<D>, origin: usize) -> Option<(Real, Real)> {
-        let (mut psi, mut j, mut weight) = (0.0, 0.0, 0.0);
-        let (nodes, fit) = (&self.nodes[..], &self.fit[..]);
-        let last = origin + layout.offset(&[2; D]);
-        assert!(last < nodes.len() && last < fit.len());
-        s.for_each_index(layout.h, origin, layout.strides(), |i, w, d| {
-            // SAFETY: i ≤ the stencil's last node, in bounds (checked above).
-            let (v, f) = unsafe { (nodes.get_unchecked(i), fit.get_unchecked(i)) };
-            // A node counts where its weight `v[5]` is positive, and its fit is zero where it does not.
-            let counts = if v[5] > 0.0 { w } else { 0.0 };
-            let mut ji = f[0];
-            for k in 0..D {
-                ji -= f[1 + k] * d[k];
-            }
-            psi += counts * v[0];
-            j += counts * ji;
-            weight += counts;
-        });
-        (weight > 0.0).then(|| (psi / weight, j / weight))
+        let field = self.field::<D>(layout, origin);
+        let mut sum = Gathered::default();
+        // SAFETY: i ≤ the stencil's last node, in bounds of `field` (checked by `field`).
+        s.for_each_index(layout.h, origin, layout.strides(), |i, w, d| unsafe { sum.add::<D>(field, i, w, &d) });
+        sum.result()
+    }
+
+    /// The nodes' rows of ψ and the J field ([`Gathered::add`] reads them), checked to hold the stencil whose first
+    /// node is `origin`.
+    #[inline(always)]
+    pub fn field<const D: usize>(&self, layout: &GridLayout<D>, origin: usize) -> &[Real] {
+        assert!((origin + layout.offset(&[2; D]) + 1) * (D + 2) <= self.field.len());
+        &self.field
     }
 }
 
-/// A node after P2G, from its sums `[Σ w V, Σ w V⁰, Σ w V⁰ J, Σ w V⁰ (x_p − x_i)]` (m^D, m^(D+1)) and support
-/// fraction: `[ψ, J_c, c (3), m]` with the packing `ψ = Σ w V / (h^D f)`, the particles' mean `J_c` at their
-/// centroid `x_i + c` (m) and their weight `m = Σ w V⁰`; zeros where `f` < [`MIN_WALL_FRACTION`] or `m` = 0.
-#[inline]
-fn node_packing<const D: usize>(sums: [Real; 6], fraction: Real, inv_cell: Real) -> [Real; 6] {
-    let rest = sums[1];
-    if fraction >= MIN_WALL_FRACTION && rest > 0.0 {
-        let mut out = [sums[0] * inv_cell / fraction, sums[2] / rest, 0.0, 0.0, 0.0, rest];
+/// The sums a particle gathers from the packing's field over its stencil ([`Packing::at`]); G2P forms them in its
+/// velocity's walk where it can.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Gathered {
+    psi: Real,
+    j: Real,
+    weight: Real,
+}
+
+impl Gathered {
+    /// Adds node `i` of weight `w` at `d = x_i − x_p` (m): `w ψ_i` and `w (J_i − g_i·d)`, and `w` to the weight
+    /// where the node counts (its packing is positive; its row is zero where it does not).
+    ///
+    /// # Safety
+    /// Node `i`'s row is in bounds of `field` ([`Packing::field`] checks the stencil's last node).
+    #[inline(always)]
+    pub unsafe fn add<const D: usize>(&mut self, field: &[Real], i: usize, w: Real, d: &crate::math::Vector<D>) {
+        // SAFETY: the caller's promise.
+        let f = unsafe { field.get_unchecked(i * (D + 2)..(i + 1) * (D + 2)) };
+        let mut j_i = f[1];
         for k in 0..D {
-            out[2 + k] = sums[3 + k] / rest;
+            j_i -= f[2 + k] * d[k];
         }
-        out
-    } else {
-        [0.0; 6]
+        self.psi += w * f[0];
+        self.j += w * j_i;
+        self.weight += if f[0] > 0.0 { w } else { 0.0 };
+    }
+
+    /// `(ψ_p, J̄_p)`, the sums over the weight of the nodes that count, or `None` when none does.
+    #[inline(always)]
+    pub fn result(&self) -> Option<(Real, Real)> {
+        (self.weight > 0.0).then(|| (self.psi / self.weight, self.j / self.weight))
     }
 }
 
-/// Node `i`'s J as a linear field, `[J_i, g (3)]`: the gradient g (1/m) fitted by weighted least squares to the
-/// centroid values of the node and its neighbours along the axes (each weighted by its `m`), and
-/// `J_i = J_c − g·c`; zeros where the node does not count. `strides` and `dims` are the grid's.
-fn node_fit<const D: usize>(
-    nodes: &[[Real; 6]],
+/// `1 / (h^D f_i)` (1/m^D) for node `i`, `f_i` the part of its support inside the material where `region` places
+/// the walls; 0 where `f_i` < [`MIN_WALL_FRACTION`].
+fn per_volume<const D: usize>(layout: &GridLayout<D>, region: &dyn Region<D>, i: usize) -> Real {
+    let fraction = region.support_fraction(&layout.position(i), layout.h);
+    if fraction >= MIN_WALL_FRACTION {
+        1.0 / (layout.h.powi(D as i32) * fraction)
+    } else {
+        0.0
+    }
+}
+
+/// P2G's sums with the nodes' `1 / (h^D f_i)`, read by [`node_field`].
+struct Sums<'a> {
+    nodes: &'a [[Real; 6]],
+    per_volume: &'a [Real],
+}
+
+impl Sums<'_> {
+    /// Node `i`'s particles: `[ψ, J_c, c (3)]` and their weight `m = Σ w V⁰` (m^D), with the packing
+    /// `ψ = Σ w V / (h^D f)` and the particles' mean `J_c` at their centroid `x_i + c` (m); `None` where the node
+    /// does not count (`f` < [`MIN_WALL_FRACTION`] or `m` = 0).
+    #[inline(always)]
+    fn node<const D: usize>(&self, i: usize) -> Option<([Real; 5], Real)> {
+        let (sums, per_volume) = (&self.nodes[i], self.per_volume[i]);
+        let rest = sums[1];
+        (per_volume > 0.0 && rest > 0.0).then(|| {
+            // A counted node's packing is positive (its relaxing fluid's rest volume is in the first sum too),
+            // which is how G2P tells it from a node that does not count.
+            let per_rest = 1.0 / rest;
+            let mut out = [(sums[0] * per_volume).max(Real::MIN_POSITIVE), sums[2] * per_rest, 0.0, 0.0, 0.0];
+            for k in 0..D {
+                out[2 + k] = sums[3 + k] * per_rest;
+            }
+            (out, rest)
+        })
+    }
+}
+
+/// Node `i`'s row of the field, `[ψ, J_i, g (3)]` (the first D + 2 used): the gradient g (1/m) fitted by weighted
+/// least squares to the centroid values of the node and its neighbours along the axes (each weighted by its
+/// `m`), and `J_i = J_c − g·c`; zeros where the node does not count. `at` is the node's place on the grid's
+/// axes, and `strides` and `dims` are the grid's.
+#[inline]
+fn node_field<const D: usize>(
+    nodes: &Sums<'_>,
     i: usize,
+    at: &[usize; D],
     strides: &[usize; D],
     dims: &[usize; D],
     h: Real,
-) -> [Real; 4] {
-    let v = nodes[i];
-    if v[5] <= 0.0 {
-        return [0.0; 4];
-    }
+) -> [Real; 5] {
+    let Some((v, _)) = nodes.node::<D>(i) else {
+        return [0.0; 5];
+    };
     let mut a = [[0.0; 3]; 3];
     let mut b = [0.0; 3];
     let mut total = 0.0;
     for k in 0..D {
-        let at = (i / strides[k]) % dims[k];
         for side in [-1isize, 1] {
             // The grid's first and last nodes along the axis have no neighbour beyond them.
-            if (side < 0 && at == 0) || (side > 0 && at + 1 == dims[k]) {
+            if (side < 0 && at[k] == 0) || (side > 0 && at[k] + 1 == dims[k]) {
                 continue;
             }
-            let u = &nodes[(i as isize + side * strides[k] as isize) as usize];
-            if u[5] <= 0.0 {
+            let Some((u, m)) = nodes.node::<D>((i as isize + side * strides[k] as isize) as usize) else {
                 continue;
-            }
+            };
             let mut dp = [0.0; 3];
             for l in 0..D {
                 dp[l] = u[2 + l] - v[2 + l];
             }
             dp[k] += side as Real * h;
-            let m = u[5];
             total += m;
             for r in 0..D {
                 b[r] += m * dp[r] * (u[1] - v[1]);
@@ -212,33 +257,41 @@ fn node_fit<const D: usize>(
         for r in 0..D {
             a[r][r] += ridge;
         }
-        solve::<D>(&mut a, &mut b, &mut g);
+        g = solve::<D>(&a, &b);
     }
     let mut j = v[1];
     for k in 0..D {
         j -= g[k] * v[2 + k];
     }
-    [j, g[0], g[1], g[2]]
+    let mut row = [v[0], j, 0.0, 0.0, 0.0];
+    row[2..2 + D].copy_from_slice(&g[..D]);
+    row
 }
 
-/// Solves the symmetric positive definite `a x = b` (D ≤ 3) by Gaussian elimination.
-fn solve<const D: usize>(a: &mut [[Real; 3]; 3], b: &mut [Real; 3], x: &mut [Real; 3]) {
-    for c in 0..D {
-        for r in c + 1..D {
-            let f = a[r][c] / a[c][c];
-            for k in c..D {
-                a[r][k] -= f * a[c][k];
+/// Solves the symmetric positive definite `a x = b` (D = 2 or 3) by the adjugate: one division, where the
+/// elimination's divisions wait on each other.
+fn solve<const D: usize>(a: &[[Real; 3]; 3], b: &[Real; 3]) -> [Real; 3] {
+    let mut x = [0.0; 3];
+    match D {
+        2 => {
+            let per_det = 1.0 / (a[0][0] * a[1][1] - a[0][1] * a[1][0]);
+            x[0] = (a[1][1] * b[0] - a[0][1] * b[1]) * per_det;
+            x[1] = (a[0][0] * b[1] - a[1][0] * b[0]) * per_det;
+        }
+        3 => {
+            let cof = |r: usize, c: usize| {
+                let (r1, r2, c1, c2) = ((r + 1) % 3, (r + 2) % 3, (c + 1) % 3, (c + 2) % 3);
+                a[r1][c1] * a[r2][c2] - a[r1][c2] * a[r2][c1]
+            };
+            let adj: [[Real; 3]; 3] = std::array::from_fn(|r| std::array::from_fn(|c| cof(c, r)));
+            let per_det = 1.0 / (a[0][0] * adj[0][0] + a[0][1] * adj[1][0] + a[0][2] * adj[2][0]);
+            for (r, out) in x.iter_mut().enumerate() {
+                *out = (adj[r][0] * b[0] + adj[r][1] * b[1] + adj[r][2] * b[2]) * per_det;
             }
-            b[r] -= f * b[c];
         }
+        _ => unreachable!("the packing runs in 2D and 3D"),
     }
-    for c in (0..D).rev() {
-        let mut s = b[c];
-        for k in c + 1..D {
-            s -= a[c][k] * x[k];
-        }
-        x[c] = s / a[c][c];
-    }
+    x
 }
 
 /// The J a particle of packing `psi` and volume ratio `j` relaxes toward: `1/ψ` within [1/`MAX_PACKING`,
@@ -275,6 +328,35 @@ mod tests {
     use crate::geometry::{Point, Polygon, Region, Side, WallShape, Walls2};
     use crate::grid::GridLayout;
     use crate::step::schedule::Schedule;
+
+    /// The adjugate solve of a symmetric positive definite system returns x with `a x = b` to rounding, in 2D and
+    /// 3D (a system as the gradient fit builds it: a ridge on a matrix of outer products).
+    #[test]
+    fn solve_inverts_a_symmetric_positive_definite_system() {
+        let rows = [[0.9, -0.3, 0.2], [0.1, 1.1, -0.4], [-0.5, 0.2, 0.7], [0.3, 0.3, 0.3]];
+        for dim in [2, 3] {
+            let mut a = [[0.0; 3]; 3];
+            for row in rows {
+                for r in 0..dim {
+                    for c in 0..dim {
+                        a[r][c] += row[r] * row[c];
+                    }
+                }
+            }
+            for (r, line) in a.iter_mut().enumerate().take(dim) {
+                line[r] += 1e-2;
+            }
+            let expect = [0.7, -1.3, 2.1];
+            let mut b = [0.0; 3];
+            for r in 0..dim {
+                b[r] = (0..dim).map(|c| a[r][c] * expect[c]).sum();
+            }
+            let x = if dim == 2 { solve::<2>(&a, &b) } else { solve::<3>(&a, &b) };
+            for k in 0..dim {
+                assert!((x[k] - expect[k]).abs() < 1e-12, "{dim}D: x = {x:?}");
+            }
+        }
+    }
 
     /// The integral of the quadratic B-spline is 0, 1/6, 1/2, 5/6, 1 at −1.5, −0.5, 0, 0.5, 1.5 cells, and its
     /// slope is the spline itself.

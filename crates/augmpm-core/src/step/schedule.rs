@@ -381,6 +381,13 @@ impl<const D: usize> Schedule<D> {
     /// Calls `f(node)` for every node of node block `b`.
     #[inline]
     pub fn for_each_node(&self, layout: &GridLayout<D>, b: u32, mut f: impl FnMut(usize)) {
+        self.for_each_node_at(layout, b, |i, _| f(i));
+    }
+
+    /// Calls `f(node, coordinates)` for every node of node block `b`: its index and its place on the grid's
+    /// axes.
+    #[inline]
+    pub fn for_each_node_at(&self, layout: &GridLayout<D>, b: u32, mut f: impl FnMut(usize, &[usize; D])) {
         let c = self.block_coord(b as usize);
         let lo: [usize; D] = std::array::from_fn(|k| c[k] * BLOCK);
         let span: [usize; D] = std::array::from_fn(|k| BLOCK.min(layout.dims[k] - lo[k]));
@@ -389,8 +396,10 @@ impl<const D: usize> Schedule<D> {
         let mut at = [0usize; D];
         loop {
             let row: usize = (0..D).map(|k| (lo[k] + at[k]) * strides[k]).sum();
+            let mut coord: [usize; D] = std::array::from_fn(|k| lo[k] + at[k]);
             for i in 0..span[0] {
-                f(row + i * strides[0]);
+                coord[0] = lo[0] + i;
+                f(row + i * strides[0], &coord);
             }
             let mut k = 1;
             loop {
@@ -410,6 +419,11 @@ impl<const D: usize> Schedule<D> {
     /// Calls `f(node)` for every node of the given node blocks, in parallel.
     pub fn for_each_node_of(&self, layout: &GridLayout<D>, blocks: &[u32], f: impl Fn(usize) + Sync) {
         blocks.par_iter().with_min_len(self.min_len(MIN_BLOCKS)).for_each(|&b| self.for_each_node(layout, b, &f));
+    }
+
+    /// Calls `f(node, coordinates)` for every node of the given node blocks, in parallel.
+    pub fn for_each_node_of_at(&self, layout: &GridLayout<D>, blocks: &[u32], f: impl Fn(usize, &[usize; D]) + Sync) {
+        blocks.par_iter().with_min_len(self.min_len(MIN_BLOCKS)).for_each(|&b| self.for_each_node_at(layout, b, &f));
     }
 
     /// Sets `data` to `zero` on every node of the given node blocks (in parallel).

@@ -349,12 +349,11 @@ pub fn p2g<const D: usize>(
                 // SAFETY: exclusive as stated above.
                 unsafe { out.scatter_volume(layout, &s, origin, volumes) };
             }
-            if packs {
-                let volume = material.occupied_volume(&point, rho_p);
+            // The packing sums of the particle, which the momentum's scatter takes along where it can.
+            let mut packing_sums = packs.then(|| {
                 let rest = if material.packing_relaxation_time().is_some() { particles.vol0[p] } else { 0.0 };
-                // SAFETY: exclusive as stated above.
-                unsafe { out.scatter_packing(layout, &s, origin, [volume, rest, rest * particles.jp[p]]) };
-            }
+                [material.occupied_volume(&point, rho_p), rest, rest * particles.jp[p]]
+            });
             let (mp, vp, cp) = (particles.mass[p], particles.v[p], particles.c[p]);
             match (t.augmented.and_then(|(g, table)| table.entry(p).map(|e| (g, e))), tile.as_deref_mut()) {
                 (None, Some(tile)) => tile.scatter(reach, &s, h, mp, &(vp * mp), &(cp * mp - stress * apic)),
@@ -363,9 +362,11 @@ pub fn p2g<const D: usize>(
                     // SAFETY: exclusive as stated above.
                     unsafe {
                         if track_spline {
-                            out.scatter_regular::<true>(layout, &s, origin, &node);
+                            out.scatter_regular::<true, false>(layout, &s, origin, &node, [0.0; 3]);
+                        } else if let Some(sums) = packing_sums.take() {
+                            out.scatter_regular::<false, true>(layout, &s, origin, &node, sums);
                         } else {
-                            out.scatter_regular::<false>(layout, &s, origin, &node);
+                            out.scatter_regular::<false, false>(layout, &s, origin, &node, [0.0; 3]);
                         }
                     }
                 }
@@ -402,6 +403,10 @@ pub fn p2g<const D: usize>(
                         }
                     }
                 }
+            }
+            if let Some(sums) = packing_sums {
+                // SAFETY: exclusive as stated above.
+                unsafe { out.scatter_packing(layout, &s, origin, sums) };
             }
         }
     };
@@ -450,27 +455,30 @@ struct RegularNode<const D: usize> {
 }
 
 impl<const D: usize> P2gOut<'_, D> {
-    /// Scatters a particle's [`RegularNode`] over its stencil, to the B-spline mass too with `SPLINE` (the
-    /// branch taken once a particle, not a node).
+    /// Scatters a particle's [`RegularNode`] over its stencil, to the B-spline mass too with `SPLINE`, and with
+    /// `PACK` its packing sums `packing_sums` as [`Self::scatter_packing`] does, in the same walk (the branches
+    /// taken once a particle, not a node).
     ///
     /// # Safety
     /// No other thread writes the stencil's nodes meanwhile.
     #[inline(always)]
-    unsafe fn scatter_regular<const SPLINE: bool>(
+    unsafe fn scatter_regular<const SPLINE: bool, const PACK: bool>(
         &self,
         layout: &GridLayout<D>,
         s: &Stencil<D>,
         origin: usize,
         node: &RegularNode<D>,
+        packing_sums: [Real; 3],
     ) {
         // The pointers copied: read through `self`, they were loaded again after every node's stores
         // (a store might have changed them, as far as the compiler knows).
-        let Self { mass, spline, momentum, .. } = *self;
+        let Self { mass, spline, momentum, packing, .. } = *self;
         let RegularNode { mp, mv, affine } = *node;
         // The farthest node of the stencil: one bounds check for the 3^D writes.
         let last = last_node(layout, origin);
         assert!(last < mass.len() && last < momentum.len());
         assert!(!SPLINE || last < spline.len());
+        assert!(!PACK || last < packing.len());
         // SAFETY: i ≤ last, checked above; exclusive by the caller.
         s.for_each_index(layout.h, origin, layout.strides(), |i, w, d| unsafe {
             mass.update_unchecked(i, |m| *m += w * mp);
@@ -478,6 +486,9 @@ impl<const D: usize> P2gOut<'_, D> {
                 spline.update_unchecked(i, |m| *m += w * mp);
             }
             momentum.update_unchecked(i, |m| *m += (mv + affine * d) * w);
+            if PACK {
+                packing.update_unchecked(i, |v| add_packing::<D>(v, w, &d, &packing_sums));
+            }
         });
     }
 
@@ -507,20 +518,24 @@ impl<const D: usize> P2gOut<'_, D> {
     /// No other thread writes the stencil's nodes meanwhile.
     #[inline]
     unsafe fn scatter_packing(&self, layout: &GridLayout<D>, s: &Stencil<D>, origin: usize, sums: [Real; 3]) {
-        let rest = sums[1];
         let packing = self.packing;
         assert!(last_node(layout, origin) < packing.len());
         // SAFETY: i ≤ the stencil's last node, in bounds (checked above); exclusive by the caller.
         s.for_each_index(layout.h, origin, layout.strides(), |i, w, d| unsafe {
-            packing.update_unchecked(i, |v| {
-                v[0] += w * sums[0];
-                v[1] += w * sums[1];
-                v[2] += w * sums[2];
-                for k in 0..D {
-                    v[3 + k] -= w * rest * d[k];
-                }
-            })
+            packing.update_unchecked(i, |v| add_packing::<D>(v, w, &d, &sums))
         });
+    }
+}
+
+/// Adds a particle's packing sums `[V, V⁰, V⁰ J]` (`sums`) to a node's at weight `w` and offset `d = x_i − x_p`
+/// (m): `w [V, V⁰, V⁰ J, V⁰ (x_p − x_i)]`.
+#[inline(always)]
+fn add_packing<const D: usize>(node: &mut [Real; 6], w: Real, d: &Vector<D>, sums: &[Real; 3]) {
+    node[0] += w * sums[0];
+    node[1] += w * sums[1];
+    node[2] += w * sums[2];
+    for k in 0..D {
+        node[3 + k] -= w * sums[1] * d[k];
     }
 }
 
@@ -714,21 +729,35 @@ where
             match t.augmented.and_then(|(g, table)| table.entry(p).map(|e| (g, e))) {
                 None => {
                     let (s, origin) = stencil(layout, xp, inv_h);
-                    if tau.is_some() {
-                        psi = packing.at(layout, &s, origin);
-                    }
                     if D == 3 {
+                        if tau.is_some() {
+                            psi = packing.at(layout, &s, origin);
+                        }
                         let ratio = smooths.then_some(&volume_ratio.nodes[..]);
                         (vn, cn, jbar) = regular_gather_by_rows(layout, &s, origin, velocity, ratio);
                         cn *= apic;
                     } else {
                         assert!(last_node(layout, origin) < velocity.len());
-                        s.for_each_index(h, origin, layout.strides(), |i, w, d| {
-                            // SAFETY: i ≤ the stencil's last node, in bounds (checked above).
-                            let vi = unsafe { velocity.get_unchecked(i) } * w;
-                            vn += vi;
-                            cn += vi * d.transpose();
-                        });
+                        if tau.is_some() {
+                            // The packing's field in the velocity's walk.
+                            let field = packing.field(layout, origin);
+                            let mut sum = packing::Gathered::default();
+                            s.for_each_index(h, origin, layout.strides(), |i, w, d| {
+                                // SAFETY: i ≤ the stencil's last node, in bounds of both (checked above).
+                                let vi = unsafe { velocity.get_unchecked(i) } * w;
+                                vn += vi;
+                                cn += vi * d.transpose();
+                                unsafe { sum.add::<D>(field, i, w, &d) };
+                            });
+                            psi = sum.result();
+                        } else {
+                            s.for_each_index(h, origin, layout.strides(), |i, w, d| {
+                                // SAFETY: i ≤ the stencil's last node, in bounds (checked above).
+                                let vi = unsafe { velocity.get_unchecked(i) } * w;
+                                vn += vi;
+                                cn += vi * d.transpose();
+                            });
+                        }
                         cn *= apic;
                         if smooths {
                             jbar = volume_ratio_at(layout, &s, origin, volume_ratio);
