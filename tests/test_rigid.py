@@ -36,7 +36,21 @@ def test_a_box_half_as_dense_as_water_floats():
         heights.append(sim.rigid_bodies[0][1])
     assert outside == 0
     assert np.ptp(heights[-10:]) < 0.25 * sim.cell_size
-    assert 0.4 < rigid.submerged(sim) < 0.7
+    assert 0.4 < rigid.submerged(sim, rigid.water_level(sim, sim.rigid_bodies[0][0])) < 0.7
+
+
+def test_the_level_from_the_waters_volume_holds_that_volume():
+    """The level the buoyancy case reads from the water's volume is where the tank, less the body's part below
+    it, holds Σ m/ρ: to the bisection's 1e-9 m times the tank's width (0.8 m), with a box pushed halfway into
+    the water by hand and with the box above it."""
+    body = {"shape": "polygon", "vertices": [[0.4, 0.30], [0.6, 0.30], [0.6, 0.4], [0.4, 0.4]], "density": 500.0}
+    for vertices in (body["vertices"], BOX):
+        sim = augmpm.Simulation(_scene([{**body, "vertices": vertices}]), "augmented")
+        sim.step(1)
+        level = rigid.level_from_volume(sim)
+        held = rigid.clip_below(np.array(rigid.TANK), level) - rigid.clip_below(rigid.outline(sim), level)
+        assert abs(held - np.sum(sim.masses / sim.densities)) < 2e-9
+        assert 0.3 < level < 0.4
 
 
 def test_a_body_out_of_reach_of_the_material_falls_freely():
