@@ -11,6 +11,7 @@ import numpy as np
 from augmpm._core import SimulationError
 from augmpm.scene import scene_class
 from augmpm.simulation import Simulation
+from augmpm.validation import bounds
 
 METHODS = ("naive", "augmented")
 
@@ -79,8 +80,9 @@ def simulate(
     sample_times: list[float],
     sample: Callable[[Simulation], object],
 ) -> tuple[list[object], Simulation]:
-    """Runs `scene` (2D or 3D) with `method` and calls `sample(sim)` at each of `sample_times` (s, increasing).
-    Raises `CaseFailed` when the simulation fails."""
+    """Runs `scene` (2D or 3D) with `method` and calls `sample(sim)` at each of `sample_times` (s, increasing);
+    the fluids' J inside the water is watched there too (:mod:`augmpm.validation.bounds`). Raises `CaseFailed`
+    when the simulation fails."""
     sim = Simulation(scene_class(scene).from_dict(scene), method)
     out = []
     for t in sample_times:
@@ -90,6 +92,7 @@ def simulate(
         except SimulationError as e:
             raise CaseFailed(str(e), sim.time) from None
         out.append(sample(sim))
+        bounds.watch(sim, method)
     return out, sim
 
 

@@ -9,6 +9,7 @@ import numpy as np
 from augmpm._core import SimulationError
 from augmpm.scene import Scene
 from augmpm.simulation import Simulation
+from augmpm.validation import bounds
 from augmpm.validation.common import METHODS, CaseFailed, fluid, simulate
 from augmpm.validation.records import Record
 
@@ -91,6 +92,7 @@ def _every(scene: dict, method: str, steps: int, samples: int) -> list[dict]:
         except SimulationError as e:
             raise CaseFailed(str(e), sim.time) from None
         out.append(sim.metrics())
+        bounds.watch(sim, method)
     return out
 
 

@@ -27,6 +27,7 @@ import numpy as np
 
 from augmpm.scene import Scene, load_scene
 from augmpm.simulation import Simulation
+from augmpm.validation import bounds
 from augmpm.validation.common import METHODS
 from augmpm.validation.records import Record
 
@@ -209,6 +210,7 @@ def floating(
     while sim.time < end - 1e-9:
         sim.step(max(1, round(0.05 / sim.dt)))
         inside = max(inside, sim.metrics()["n_outside"])
+        bounds.watch(sim, method)
         if sim.time > end - 0.5:
             speeds.append(math.hypot(*sim.rigid_bodies[0][3:5]))
     x = sim.rigid_bodies[0][0]
@@ -222,13 +224,16 @@ def shipped(name: str, method: str, resolution: int) -> Simulation:
     return Simulation(scene.model_copy(update={"grid": grid}), method)
 
 
-def sampled(sim: Simulation, end: float, every: float = 0.02) -> list[tuple[float, int, float]]:
+def sampled(sim: Simulation, end: float, every: float = 0.02, method: str = "") -> list[tuple[float, int, float]]:
     """Runs ``sim`` to ``end`` (s); every ``every`` s the time, the particles outside the walls (inside a
-    body included) and the energy (:func:`energy`)."""
+    body included) and the energy (:func:`energy`); the fluids' J inside the water watched under ``method``
+    (:mod:`augmpm.validation.bounds`) where one is given."""
     rows = []
     while sim.time < end - 1e-9:
         sim.step(max(1, round(every / sim.dt)))
         rows.append((sim.time, sim.metrics()["n_outside"], energy(sim)))
+        if method:
+            bounds.watch(sim, method)
     return rows
 
 
@@ -270,7 +275,7 @@ def run(quick: bool) -> tuple[list[Record], dict]:
         for method in METHODS:
             sim = shipped(name, method, res)
             e0 = energy(sim)
-            rows = sampled(sim, end)
+            rows = sampled(sim, end, method=method)
             undriven = [e0] * (still_from == 0.0) + [e for t, _, e in rows if t >= still_from]
             scale = max(abs(e0 - rows[-1][2]), 1e-30)
             rec = lambda metric, value, tol, r=res, m=method, n=name: records.append(  # noqa: E731

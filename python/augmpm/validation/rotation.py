@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from augmpm.validation import bounds
 from augmpm.validation.common import METHODS, CaseFailed, fluid
 from augmpm.validation.records import Record
 
@@ -97,6 +98,7 @@ def run_rotation(condition: str, method: str, resolution: int, times: list[float
             raise CaseFailed(str(e), sim.time) from None
         ratios.append(angular_momentum(sim) / l0)
         outside = max(outside, sim.metrics()["n_outside"])
+        bounds.watch(sim, method)
     return ratios, outside
 
 

@@ -17,6 +17,7 @@ from augmpm.files import save_png, write_text
 from augmpm.simulation import THREADS_ENV, available_cores
 from augmpm.validation import (
     analytic,
+    bounds,
     channel,
     dam_break,
     film3d,
@@ -150,20 +151,23 @@ def run_validation(out: Path, quick: bool = False, progress: bool = True, jobs: 
         return _run_and_report(out, quick, angles, cases)
 
 
-def _timed(fn: Callable, args: tuple) -> tuple[list[Record], object, float]:
-    """A case's records and data, and the seconds it took (in the process that ran it)."""
+def _timed(key: str, fn: Callable, args: tuple) -> tuple[list[Record], object, float]:
+    """A case's records and data, and the seconds it took (in the process that ran it). The fluids' J inside
+    the water over every sample of the case is judged beside its own records (case ``j_bounded_<key>``,
+    :mod:`augmpm.validation.bounds`)."""
     start = time.perf_counter()
+    bounds.reset()
     recs, data = fn(*args)
-    return recs, data, time.perf_counter() - start
+    return recs + bounds.records(f"j_bounded_{key}"), data, time.perf_counter() - start
 
 
-def _in_worker(fn: Callable, args: tuple):
+def _in_worker(key: str, fn: Callable, args: tuple):
     """:func:`_timed` in a pool process. The engine's errors cannot be pickled (their module is the
     extension's): one comes back as its class name and message, for :meth:`_Cases.take` to raise again."""
     from augmpm import _core
 
     try:
-        return _timed(fn, args)
+        return _timed(key, fn, args)
     except _core.Error as e:
         return _Raised(type(e).__name__, str(e))
 
@@ -202,7 +206,7 @@ class _Cases:
             context = multiprocessing.get_context("spawn")
             self.pool = context.Pool(jobs, initializer=_share_the_cores, initargs=(threads,))
             self.results = {
-                key: self.pool.apply_async(_in_worker, (fn, args), callback=self._done(title))
+                key: self.pool.apply_async(_in_worker, (key, fn, args), callback=self._done(title))
                 for key, title, fn, args in stages
             }
             self.pool.close()
@@ -230,7 +234,7 @@ class _Cases:
         if self.pool is None:
             if self.progress:
                 print(f"validate: {title} ...", file=sys.stderr, flush=True)
-            recs, data, seconds = _timed(fn, args)
+            recs, data, seconds = _timed(key, fn, args)
             if self.progress:
                 print(f"validate: {title} done in {seconds:.0f} s", file=sys.stderr, flush=True)
         else:
@@ -438,6 +442,10 @@ def report(records: list[Record], plots: list[tuple[str, str]], quick: bool) -> 
         "",
         f"The interpolation's observed order is judged at ≥ {SECOND_ORDER:g}: a second-order method measured between"
         " two finite resolutions reads below 2 (1.85–1.91 for the circle and the sphere).",
+        "",
+        f"`j_bounded_<case>`: the fluids' J at every sample of the case's runs, over the particles at least"
+        f" {bounds.DEPTH} cells inside the water (from the walls and the free surface), within"
+        f" [{bounds.LOW:g}, {bounds.HIGH:g}]; resolution 0: every run of the case.",
         "",
     ]
     if quick:

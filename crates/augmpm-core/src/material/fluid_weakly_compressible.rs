@@ -169,6 +169,13 @@ impl<const D: usize> ConstitutiveModel<D> for WeaklyCompressibleFluid {
         // exactly for the step's constant ∇v (J stays positive however large the step's divergence).
         if self.keeps_volume_ratio() {
             *jp *= crate::math::exp_near_zero(dt * grad_v.trace());
+            // A packing fluid's J goes no higher than `MAX_DILATION`, where its stress volume stops following
+            // it (`stress_at`): a film stretched thin along a moving wall, which no pressure pulls back, grows J
+            // faster than the relaxation brings it back, and carried it to 10 and more into its neighbours'
+            // J-bar and the water's volume Σ m/ρ.
+            if self.density_estimate == DensityEstimate::Packing {
+                *jp = jp.min(MAX_DILATION);
+            }
         }
     }
 
@@ -319,6 +326,23 @@ mod tests {
                 let f3 = nalgebra::Matrix3::identity();
                 check(&f, &MaterialPoint::<3> { f: f3, jp, grad_v, mass: 2.0, vol0: 0.002, density });
             }
+        }
+    }
+
+    /// A flow that dilates a particle (tr ∇v = 20 /s for 0.1 s: J would reach e² ≈ 7.4) leaves a packing fluid's J
+    /// at `MAX_DILATION` (1.25), where its stress volume stops following J; the deformation estimate's J follows
+    /// the flow all the way (within 1e-12 of e²).
+    #[test]
+    fn a_packing_fluids_j_stops_at_the_largest_dilation() {
+        let grad_v = Matrix2::identity() * 10.0;
+        for (estimate, expect) in [(DensityEstimate::Packing, MAX_DILATION), (DensityEstimate::Deformation, 2f64.exp())]
+        {
+            let f = WeaklyCompressibleFluid { density_estimate: estimate, ..water() };
+            let (mut fm, mut jp) = (Matrix2::identity(), 1.0);
+            for _ in 0..100 {
+                f.update_deformation(&mut fm, &mut jp, &grad_v, 1e-3);
+            }
+            assert!((jp - expect).abs() < 1e-12, "{estimate:?}: J = {jp}, expected {expect}");
         }
     }
 
