@@ -59,3 +59,16 @@ def test_nothing_is_recorded_before_a_step_or_without_a_fluid():
     bounds.reset()
     bounds.watch(sim, "augmented")
     assert bounds.records("case") == []
+
+
+def test_the_shipped_scene_check_runs_a_scene_and_reports_its_range(capsys):
+    """`python -m augmpm.validation.bounds` over the first 3 output steps of the floating bodies: J inside the water
+    within [0.5, 2] (0.98–1.00 measured), exit 0, one line naming the scene and the outputs; with the packing
+    density as well."""
+    assert bounds.main(["rigid/floating_bodies", "--outputs", "3"]) == 0
+    assert bounds.main(["rigid/floating_bodies", "--outputs", "3", "--density-estimate", "packing"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 2 and all(line.startswith("rigid/floating_bodies: J inside the water") for line in lines)
+    assert all("over 3 outputs" in line and "NOT" not in line for line in lines)
+    low, high, outputs = bounds.shipped("rigid/floating_bodies", outputs=3)
+    assert outputs == 3 and bounds.LOW <= low <= high <= bounds.HIGH

@@ -90,11 +90,11 @@ def interior_volume_ratios(sim: Simulation) -> np.ndarray:
 
 
 def shipped(
-    name: str, method: str = "augmented", density_estimate: str | None = None
+    name: str, method: str = "augmented", density_estimate: str | None = None, outputs: int | None = None
 ) -> tuple[float, float, int] | None:
-    """Runs the shipped scene ``name`` to its end with ``method`` (its fluids' ``density_estimate`` replaced where
-    one is given), watching the fluids' J inside the water at every output step: ``(lowest, highest, outputs)``,
-    or None where no fluid particle was ever inside."""
+    """Runs the shipped scene ``name`` to its end (or its first ``outputs`` output steps) with ``method`` (its
+    fluids' ``density_estimate`` replaced where one is given), watching the fluids' J inside the water at every
+    output step: ``(lowest, highest, outputs)``, or None where no fluid particle was ever inside."""
     from augmpm.scene import load_scene
 
     scene = load_scene(name)
@@ -103,16 +103,17 @@ def shipped(
         scene = load_scene(name, values={f"bodies[{k}].material.density_estimate": density_estimate for k in fluids})
     sim = Simulation(scene, method)
     reset()
-    outputs = 0
-    while (scene.time.steps is not None and sim.steps_done < scene.time.steps) or (
-        scene.time.end is not None and sim.time < scene.time.end - 1e-12
+    done = 0
+    while (outputs is None or done < outputs) and (
+        (scene.time.steps is not None and sim.steps_done < scene.time.steps)
+        or (scene.time.end is not None and sim.time < scene.time.end - 1e-12)
     ):
         left = scene.time.steps - sim.steps_done if scene.time.steps is not None else scene.time.output_interval
         sim.step(max(1, min(scene.time.output_interval, left)))
         watch(sim, method)
-        outputs += 1
+        done += 1
     seen = _SEEN.get(method)
-    return None if seen is None else (seen.low, seen.high, outputs)
+    return None if seen is None else (seen.low, seen.high, done)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -126,6 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("names", nargs="*", help="shipped scenes (default: every one with a fluid, the paper's left out)")
     ap.add_argument("--method", choices=("naive", "augmented"), default="augmented")
     ap.add_argument("--density-estimate", default=None, help="the fluids' density_estimate (default: the scene's)")
+    ap.add_argument("--outputs", type=int, default=None, help="only the first N output steps (default: to the end)")
     args = ap.parse_args(argv)
     names = args.names or [
         name
@@ -134,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     ]
     failed = False
     for name in names:
-        result = shipped(name, args.method, args.density_estimate)
+        result = shipped(name, args.method, args.density_estimate, args.outputs)
         if result is None:
             print(f"{name}: no fluid particle {DEPTH} cells inside the water", flush=True)
             continue
