@@ -60,9 +60,9 @@ def test_water_in_a_turning_circular_container_keeps_its_volume_and_a_bounded_j(
     steps): a thin film carried up the wall stretches, and nothing pulls it back, so its J grows. With the packing
     density Σ m/ρ rises at most 2% above its start at any sample (40 steps apart; measured +1.6% at most over
     2,000 steps), falls no more than the water's compression under its own weight allows (ρ0 g H / (k γ) = 3.1%
-    at the bottom of 0.2 m; −2.1% measured) and J inside the water stays within [0.5, 2] (measured 1.01). (With
-    the J-bar density a film particle's J reached 3·10³, the J-bar spread it to the water around it, 309 two
-    cells inside, and Σ m/ρ read 133 times the water's volume.)"""
+    at the bottom of 0.2 m; −2.1% measured) and J inside the water stays at 0.5 or above (0.98 measured; above,
+    J stops at 1.25 by construction). (With the J-bar density a film particle's J reached 3·10³, the J-bar spread
+    it to the water around it, 309 two cells inside, and Σ m/ρ read 133 times the water's volume.)"""
     from augmpm.scene import Scene
     from augmpm.validation import bounds, moving
 
@@ -77,7 +77,7 @@ def test_water_in_a_turning_circular_container_keeps_its_volume_and_a_bounded_j(
     j = np.concatenate(inside)
     assert max(volumes) / volumes[0] - 1 <= 0.02
     assert min(volumes) / volumes[0] - 1 >= -0.031
-    assert j.size and 0.5 <= j.min() and j.max() <= 2.0
+    assert j.size and j.min() >= 0.5
 
 
 def test_a_run_resumed_from_a_checkpoint_and_on_one_thread_is_bitwise_the_same():

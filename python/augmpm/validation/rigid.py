@@ -244,6 +244,7 @@ def run(quick: bool) -> tuple[list[Record], dict]:
         sim = thrown_disk(method, res, steps)
         p0, l0 = momenta(sim)
         sim.step(steps)
+        bounds.watch(sim, method)
         p1, l1 = momenta(sim)
         rec = lambda case, metric, value, tol, r=res, m=method: records.append(  # noqa: E731
             Record(case, m, 0.0, r, metric, value, tol)

@@ -80,8 +80,8 @@ fn default_gamma() -> Real {
 /// rather than each step's sampling noise.
 pub const DEFAULT_RELAXATION_TIME: Real = 0.05;
 
-/// With the deformation density, the stress volume of a particle follows its dilation up to this
-/// factor of its rest volume.
+/// With the deformation and packing densities, the stress volume of a particle follows its dilation up to this
+/// factor of its rest volume; a packing fluid's J itself goes no higher.
 pub const MAX_DILATION: Real = 1.25;
 
 impl WeaklyCompressibleFluid {

@@ -29,7 +29,8 @@ use crate::parallel::Disjoint;
 use crate::step::schedule::Schedule;
 use rayon::prelude::*;
 
-/// The packing sums and each node's support fraction; empty when no material relaxes toward the packing.
+/// The packing sums and each node's share of its support inside the material; empty when no material relaxes
+/// toward the packing.
 #[derive(Clone, Debug, Default)]
 pub struct Packing {
     /// Per node, P2G's sums: the particles' occupied volume `Σ_p w_ip V_p` (m^D), and the relaxing fluids'
@@ -45,14 +46,14 @@ pub struct Packing {
 }
 
 impl Packing {
-    /// Zero sums on every node of `layout`, and the support fractions of the walls as `region` places them.
+    /// Zero sums on every node of `layout`, and the nodes' `1/(h^D f)` with the walls where `region` places them.
     pub fn new<const D: usize>(layout: &GridLayout<D>, region: &dyn Region<D>) -> Self {
         let mut packing = Self { nodes: vec![[0.0; 6]; layout.num_nodes()], field: Vec::new(), per_volume: Vec::new() };
         packing.place_walls(layout, region);
         packing
     }
 
-    /// Every node's support fraction where the walls of `region` are now (a restored state puts them back).
+    /// Every node's `1/(h^D f)` with the walls of `region` where they are now (a restored state puts them back).
     pub fn place_walls<const D: usize>(&mut self, layout: &GridLayout<D>, region: &dyn Region<D>) {
         self.per_volume = (0..layout.num_nodes()).into_par_iter().map(|i| per_volume(layout, region, i)).collect();
     }
@@ -77,7 +78,7 @@ impl Packing {
         self.nodes.fill([0.0; 6]);
     }
 
-    /// The support fractions again on the schedule's active blocks, where the walls of `region` are now
+    /// The nodes' `1/(h^D f)` again on the schedule's active blocks, with the walls of `region` where they are now
     /// (moving walls: the nodes the particles reach this step).
     pub fn follow_walls<const D: usize>(
         &mut self,
@@ -256,6 +257,15 @@ fn node_field<const D: usize>(
         let ridge = 1e-2 * h * h * total;
         for r in 0..D {
             a[r][r] += ridge;
+        }
+        // Scaled to entries of order 1 (a's are of order m h², with m up to h^D): the adjugate's determinant is
+        // a product of D of them, which in 3D single precision would fall below the smallest normal number.
+        let scale = 1.0 / (h * h * total);
+        for r in 0..D {
+            b[r] *= scale;
+            for c in 0..D {
+                a[r][c] *= scale;
+            }
         }
         g = solve::<D>(&a, &b);
     }
